@@ -1,0 +1,17 @@
+"""trackenv: a fast, verified JAX simulator of the iRobot PackBot tracked vehicle on flat terrain.
+
+Public API (see README):
+    load_params, replace, list_terrains  -- parameters as immutable pytrees (configs/)
+    VoltageProfile, simulate, Trajectory -- trajectories and instrument channels
+    SimulationDiverged                   -- raised when a simulation goes non-finite
+"""
+
+from .params import ConfigError, Params, load_params, list_terrains, list_vehicles, replace
+from .physics.model import State, initial_state
+from .simulate import SimulationDiverged, Trajectory, VoltageProfile, simulate
+
+__all__ = [
+    "ConfigError", "Params", "load_params", "list_terrains", "list_vehicles", "replace",
+    "State", "initial_state", "SimulationDiverged", "Trajectory", "VoltageProfile", "simulate",
+]
+__version__ = "0.1.0"

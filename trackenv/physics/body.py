@@ -1,0 +1,27 @@
+"""Planar rigid-body dynamics of the vehicle (MODEL.md §5). SI units."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def pose_rate(pose, vel):
+    """World-frame kinematics: dX/dt = u cos psi - v sin psi, dY/dt = u sin psi + v cos psi, dpsi/dt = r."""
+    psi = pose[2]
+    u, v, r = vel[0], vel[1], vel[2]
+    c, s = jnp.cos(psi), jnp.sin(psi)
+    return jnp.stack([u * c - v * s, u * s + v * c, r])
+
+
+def velocity_rate(vehicle, vel, force_x, force_y, moment_z):
+    """Body-frame Newton-Euler: m(du/dt - v r) = F_x, m(dv/dt + u r) = F_y, I_z dr/dt = M_z."""
+    u, v, r = vel[0], vel[1], vel[2]
+    return jnp.stack(
+        [force_x / vehicle.mass + v * r, force_y / vehicle.mass - u * r, moment_z / vehicle.yaw_inertia]
+    )
+
+
+def kinetic_energy(vehicle, vel):
+    """Translational + yaw kinetic energy of the body [J]."""
+    u, v, r = vel[0], vel[1], vel[2]
+    return 0.5 * vehicle.mass * (u * u + v * v) + 0.5 * vehicle.yaw_inertia * r * r

@@ -1,0 +1,123 @@
+"""Track-terrain contact: kinematics, z*/z-bar logic, shear-displacement rates and contact forces.
+
+MODEL.md §3; thesis §3.4.2-3.4.6. Shapes follow ``trackenv.physics`` (element arrays (2, N, *b)).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import terramechanics as tm
+from .geometry import belt_radius, contact_area, contact_x, track_y
+
+# Smoothing constants of Table C.1 (MODEL.md §2), SI.
+LEADING_EDGE_SPEED = 1e-2  # m/s, Delta V_z: below it the leading edge follows the ground speed
+MIN_Z_STAR = 1e-6  # m, Delta Z: floor of z* in the decay rate |V_t|/z*
+SLIP_SAT_START, SLIP_SAT_END = 1e-3, 1.5e-2  # m/s, saturation of j_z (3.17)
+LATERAL_SAT_START, LATERAL_SAT_END = 5e-4, 5e-3  # m/s, saturation of j_x (3.33)
+LONG_FORCE_SMOOTHING = 1e-9  # m, sign smoothing of the longitudinal force in j'_z (3.20)
+LAT_FORCE_SMOOTHING = 3e-2  # m, sign smoothing of the lateral force in j'_x (3.36)
+COMPACTION_SPEED_SMOOTHING = 0.2  # m/s, sign smoothing of R_c in the track's ground speed
+
+
+class Kinematics(NamedTuple):
+    """Contact kinematics of both tracks at one instant (SI)."""
+
+    belt_radius: jax.Array  # m, r_s' (scalar or (*b))
+    belt_speed: jax.Array  # m/s, V_t = r_s' omega, (2, *b)
+    ground_speed: jax.Array  # m/s, u - r y_k, (2, *b)
+    slip: jax.Array  # m/s, s_k = V_t - (u - r y_k), (2, *b)
+    lateral_velocity: jax.Array  # m/s, v + r x_i, (1, N, *b)
+    z_star: jax.Array  # m, distance from the leading edge, (2, N, *b)
+    z_tilde: jax.Array  # m, distance from the leading edge or from z-bar, (2, N, *b)
+    x: jax.Array  # m, contact x, (1, N, *b)
+    y: jax.Array  # m, track centreline y, (2, *b)
+    area: jax.Array  # m^2, element areas, (1, N, *b)
+
+
+def kinematics(vehicle, terrain, vel, omega, nb: int) -> Kinematics:
+    """Contact-point velocities, slip, and the z*/z-tilde coordinates (MODEL.md §3, §3.4.2.2, 3.28-3.32)."""
+    u, v, r = vel[0], vel[1], vel[2]
+    x = contact_x(vehicle, nb)
+    y = track_y(vehicle, nb)
+    rb = belt_radius(vehicle, terrain)
+    belt_speed = rb * omega
+    ground_speed = u - r * y
+    slip = belt_speed - ground_speed
+    vy = v + r * x  # (1, N, *b)
+
+    # Leading edge: where belt material enters the contact patch (§3.4.2.2).
+    front = jnp.where(
+        belt_speed > LEADING_EDGE_SPEED,
+        True,
+        jnp.where(belt_speed < -LEADING_EDGE_SPEED, False, ground_speed >= 0.0),
+    )  # (2, *b)
+    half = 0.5 * vehicle.contact_length
+    z_from_front = half - x  # (1, N, *b)
+    z_from_rear = x + half
+    z_star = jnp.where(front[:, None], z_from_front, z_from_rear)
+
+    # z-bar: where the lateral velocity changes sign along the track (3.28-3.29).
+    vy_front = v + r * half
+    vy_rear = v - r * half
+    v_first = jnp.where(front, vy_front, vy_rear)  # (2, *b)
+    v_last = jnp.where(front, vy_rear, vy_front)
+    changes_sign = v_first * v_last < 0.0
+    denom = jnp.where(changes_sign, v_first - v_last, 1.0)
+    z_bar = jnp.where(changes_sign, v_first / denom * vehicle.contact_length, jnp.inf)
+    past = z_star >= z_bar[:, None]
+    z_tilde = jnp.where(past, z_star - z_bar[:, None], z_star)  # (3.30)
+    return Kinematics(rb, belt_speed, ground_speed, slip, vy, z_star, z_tilde, x, y, contact_area(vehicle, nb))
+
+
+def shear_decay_rates(belt_speed, kin: Kinematics):
+    """Linear decay rates |V_t|/max(z*, Delta Z) of j_z (3.14) and j_x (3.31) [1/s], each (2, N, *b)."""
+    speed = jnp.abs(belt_speed)[:, None]
+    return speed / jnp.maximum(kin.z_star, MIN_Z_STAR), speed / jnp.maximum(kin.z_tilde, MIN_Z_STAR)
+
+
+def shear_drive(kin: Kinematics):
+    """Non-stiff parts of the shear-displacement ODEs: d j_z/dt <- s_k (3.14), d j_x/dt <- v_y (3.31) [m/s]."""
+    jz_drive = jnp.broadcast_to(kin.slip[:, None], kin.z_star.shape)
+    jx_drive = jnp.broadcast_to(kin.lateral_velocity, kin.z_star.shape)
+    return jz_drive, jx_drive
+
+
+class ContactForces(NamedTuple):
+    """Forces of the ground on the vehicle (SI). Effects may replace or add to any field."""
+
+    normal: jax.Array  # N, F_n,i, (2, N, *b)
+    longitudinal: jax.Array  # N, along body +x at each element, (2, N, *b)
+    lateral: jax.Array  # N, along body +y at each element, (2, N, *b)
+    compaction: jax.Array  # N, compaction resistance along body +x per track (signed), (2, *b)
+    body_x: jax.Array  # N, extra body force along +x (effects), (*b)
+    body_y: jax.Array  # N, extra body force along +y (effects), (*b)
+    body_yaw: jax.Array  # N m, extra yaw moment (effects), (*b)
+    sprocket: jax.Array  # N m, extra resisting torque at each sprocket (effects), (2, *b)
+
+
+def shear_forces(terrain, kin: Kinematics, normal, jz, jx):
+    """Longitudinal and lateral shear forces at each element [N] (3.17-3.20, 3.33-3.36)."""
+    sat_z = tm.step5(jnp.abs(kin.slip), SLIP_SAT_START, 0.0, SLIP_SAT_END, 1.0)[:, None]
+    sat_x = tm.step5(jnp.abs(kin.lateral_velocity), LATERAL_SAT_START, 0.0, LATERAL_SAT_END, 1.0)
+    jz_sat = jz * sat_z  # (3.17)
+    jx_sat = jx * sat_x  # (3.33)
+    pressure = normal / kin.area
+    fz = tm.shear_stress(jz_sat, pressure, terrain) * kin.area  # (3.19)
+    fx = tm.shear_stress(jx_sat, pressure, terrain) * kin.area  # (3.35)
+    longitudinal = tm.step5(jz_sat, -LONG_FORCE_SMOOTHING, -fz, LONG_FORCE_SMOOTHING, fz)  # (3.20)
+    lateral = tm.step5(jx_sat, -LAT_FORCE_SMOOTHING, fx, LAT_FORCE_SMOOTHING, -fx)  # (3.36)
+    return longitudinal, lateral
+
+
+def compaction_force(vehicle, terrain, kin: Kinematics, normal):
+    """Signed compaction resistance per track along +x [N] (3.40); zero on hard ground."""
+    k = tm.bekker_modulus(terrain.k_c, terrain.k_phi, vehicle.track_width)
+    per_element = tm.compaction_resistance(
+        normal, kin.area, vehicle.contact_length, k, terrain.sinkage_exponent
+    )
+    resistance = per_element.sum(axis=1) * terrain.deformable
+    return -resistance * tm.smoothsign(kin.ground_speed, COMPACTION_SPEED_SMOOTHING)

@@ -1,0 +1,30 @@
+"""Normal load distribution under the tracks (MODEL.md §4; replaces ADAMS's contact springs, §3.4.1)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .geometry import contact_area, track_y
+
+GRAVITY = 9.81  # m/s^2
+
+
+def normal_loads(vehicle, u, r, nb: int, pitch_gradient=None):
+    """Quasi-static normal force F_n,i [N] at each contact point, shape (2, N, *b).
+
+    Rigid body on a Winkler foundation: p(x, y) = p0 + p_x x + p_y y with sum A_i p_i = m g and
+    sum A_i p_i y_k = -m a_y h (roll transfer, a_y = u r); p_x = 0 in the base model
+    (``pitch_gradient`` lets an effect supply p_x [Pa/m]). F_n,i = max(0, A_i p_i).
+    """
+    area = contact_area(vehicle, nb)  # (1, N, *b)
+    y = track_y(vehicle, nb)  # (2, *b)
+    b, length, gauge = vehicle.track_width, vehicle.contact_length, vehicle.track_gauge
+    p0 = vehicle.mass * GRAVITY / (2.0 * b * length)
+    lateral_accel = u * r
+    p_y = -2.0 * vehicle.mass * lateral_accel * vehicle.cg_height / (b * length * gauge**2)
+    pressure = (p0 + p_y * y)[:, None]  # (2, 1, *b)
+    if pitch_gradient is not None:
+        from .geometry import contact_x
+
+        pressure = pressure + pitch_gradient * contact_x(vehicle, nb)
+    return jnp.maximum(area * pressure, 0.0)

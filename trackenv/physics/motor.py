@@ -1,0 +1,35 @@
+"""DC motor and drive train of each track (4.1, 4.2; App. B). SI units."""
+
+from __future__ import annotations
+
+from .terramechanics import smoothsign
+
+OMEGA_SMOOTHING = 0.05  # rad/s, width of smoothsign(omega) for stiction and b*_int (MODEL.md §5)
+
+
+def internal_resistance_torque(internal, omega):
+    """Internal track resistance tau_int [N m]: b*_int smoothsign(omega) (5.10) + b_int omega (3.41)."""
+    return internal.constant * smoothsign(omega, OMEGA_SMOOTHING) + internal.viscous * omega
+
+
+def friction_torque(vehicle, omega):
+    """Drive-train friction b_eff omega + tau_stick smoothsign(omega) [N m] (4.1, Table 4.1)."""
+    return vehicle.drive_damping * omega + vehicle.stiction_torque * smoothsign(omega, OMEGA_SMOOTHING)
+
+
+def sprocket_acceleration(vehicle, current, omega, tau_int, tau_back):
+    """J_eff domega/dt = alpha i - b_eff omega - tau_int - tau_stick sgn(omega) - tau_back (4.1) [rad/s^2]."""
+    return (vehicle.alpha * current - friction_torque(vehicle, omega) - tau_int - tau_back) / vehicle.drive_inertia
+
+
+def current_drive(vehicle, voltage, omega):
+    """The non-stiff part of L_m di/dt = V - R_m i - alpha_v omega (4.2): (V - alpha_v omega)/L_m [A/s].
+
+    The stiff part -R_m/L_m i (time constant 0.25 ms) is integrated exactly (see ``integrate``).
+    """
+    return (voltage - vehicle.alpha_v * omega) / vehicle.motor_inductance
+
+
+def current_decay_rate(vehicle):
+    """R_m / L_m [1/s], the motor circuit's linear decay rate."""
+    return vehicle.motor_resistance / vehicle.motor_inductance

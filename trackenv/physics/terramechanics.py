@@ -1,0 +1,81 @@
+"""Terramechanics laws: shear stress vs shear displacement, pressure-sinkage, compaction resistance.
+
+Pure, elementwise functions of arrays (any shape broadcasts). SI units: stresses in Pa,
+displacements and sinkage in m, forces in N.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def step5(x, x0, h0, x1, h1):
+    """ADAMS's quintic STEP5 (3.16): h0 for x <= x0, h1 for x >= x1, C2-smooth in between."""
+    s = jnp.clip((x - x0) / (x1 - x0), 0.0, 1.0)
+    return h0 + (h1 - h0) * s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+def smoothsign(x, a):
+    """Smooth sign function STEP5(x, -a, -1, a, 1) (MODEL.md §3)."""
+    return step5(x, -a, -1.0, a, 1.0)
+
+
+def shear_strength(normal_pressure, cohesion, friction_angle):
+    """Mohr-Coulomb maximum shear stress c + sigma tan(phi) (2.1) [Pa]."""
+    return cohesion + normal_pressure * jnp.tan(friction_angle)
+
+
+def janosi_shear_stress(shear_displacement, normal_pressure, cohesion, friction_angle, shear_modulus):
+    """Janosi-Hanamoto shear stress (2.8)/(3.19): (c + sigma tan phi)(1 - exp(-|j|/K)) [Pa]."""
+    tau_max = shear_strength(normal_pressure, cohesion, friction_angle)
+    return tau_max * (1.0 - jnp.exp(-jnp.abs(shear_displacement) / shear_modulus))
+
+
+def wong_hump_shear_stress(shear_displacement, normal_pressure, cohesion, friction_angle, k_omega, k_r):
+    """Wong's humped shear law (2.11) for compact sand, silt, loam [Pa].
+
+    tau = tau_max K_r {1 + [1/(K_r (1 - 1/e)) - 1] exp(1 - j/K_w)} [1 - exp(-j/K_w)].
+    """
+    j = jnp.abs(shear_displacement) / k_omega
+    tau_max = shear_strength(normal_pressure, cohesion, friction_angle)
+    bump = 1.0 + (1.0 / (k_r * (1.0 - jnp.exp(-1.0))) - 1.0) * jnp.exp(1.0 - j)
+    return tau_max * k_r * bump * (1.0 - jnp.exp(-j))
+
+
+def wong_peak_shear_stress(shear_displacement, normal_pressure, cohesion, friction_angle, k_omega):
+    """Wong's peaked shear law (2.12) for organic terrain: tau_max (j/K_w) exp(1 - j/K_w) [Pa]."""
+    j = jnp.abs(shear_displacement) / k_omega
+    return shear_strength(normal_pressure, cohesion, friction_angle) * j * jnp.exp(1.0 - j)
+
+
+def shear_stress(shear_displacement, normal_pressure, terrain):
+    """Shear stress magnitude [Pa] from the terrain's shear law (``terrain.shear_law``, static)."""
+    c, phi, k = terrain.cohesion, terrain.friction_angle, terrain.shear_modulus
+    if terrain.shear_law == "janosi":
+        return janosi_shear_stress(shear_displacement, normal_pressure, c, phi, k)
+    if terrain.shear_law == "wong_hump":
+        return wong_hump_shear_stress(shear_displacement, normal_pressure, c, phi, k, terrain.residual_ratio)
+    if terrain.shear_law == "wong_peak":
+        return wong_peak_shear_stress(shear_displacement, normal_pressure, c, phi, k)
+    raise ValueError(f"unknown shear law {terrain.shear_law!r}")
+
+
+def bekker_modulus(k_c, k_phi, width):
+    """Bekker's combined modulus k = k_c/b + k_phi (2.4) [N/m^(n+2)]."""
+    return k_c / width + k_phi
+
+
+def bekker_sinkage(normal_pressure, k, n):
+    """Sinkage z = (p/k)^(1/n) from Bekker's p = k z^n (2.4) [m]."""
+    return (jnp.maximum(normal_pressure, 0.0) / k) ** (1.0 / n)
+
+
+def compaction_resistance(normal_force, area, contact_length, k, n):
+    """Bekker compaction resistance of one track, discretised (3.40) [N].
+
+    R_c = sum_i A_i / ((n+1) L k^(1/n)) (F_n,i / A_i)^((n+1)/n); the element axis is ``-1`` of
+    ``normal_force``/``area`` after any leading axes, i.e. it sums over axis ``axis_elements``.
+    Returns per-element contributions; callers sum over the element axis.
+    """
+    pressure = jnp.maximum(normal_force, 0.0) / area
+    return area / ((n + 1.0) * contact_length * k ** (1.0 / n)) * pressure ** ((n + 1.0) / n)

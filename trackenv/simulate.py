@@ -1,0 +1,243 @@
+"""``simulate``: drive the model with a voltage profile and record the trajectory and instruments.
+
+    >>> import trackenv as te
+    >>> params = te.load_params("dry_sand")
+    >>> profile = te.VoltageProfile.from_breakpoints([[0, 0, 0], [0.3, 11.8, 11.8], [8, 11.8, 11.8]])
+    >>> traj = te.simulate(params, profile, t_end=8.0)
+    >>> traj.channels["speed_ideal"][-1]   # ~1.108 m/s
+
+One compiled program per (shape, dtype, dt, substeps, effects); the core is a pure function
+(:func:`simulate_core`) that works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``. Batches can
+also be laid out with the vehicle index on the last axis of the profile and the parameters
+(MODEL.md §6), which needs no ``vmap``.
+
+Precision: float32 by default; pass parameters loaded with ``dtype=jnp.float64`` (and enable
+``jax_enable_x64``) for float64. Both agree to well under 1% on the thesis maneuvers (tests).
+
+Voltage limits: profiles beyond the vehicle's ``voltage_limit`` (±24 V) are *rejected* with an
+error, not clipped: a replayed log that exceeds the bus voltage is a broken log. (The environments
+clip actions to their action space, as Gymnasium users expect.)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import instruments
+from .integrate import advance, is_finite
+from .physics.model import State, initial_state
+
+DEFAULT_DT = 0.05  # s, control / output interval
+DEFAULT_SUBSTEP = 0.002  # s, chosen by the convergence study (tests/test_convergence.py, README)
+
+
+class SimulationDiverged(RuntimeError):
+    """A simulation produced a non-finite state; the message gives the time of divergence."""
+
+
+class VoltageProfile(eqx.Module):
+    """Motor voltages, piecewise linear in time and held constant beyond the ends.
+
+    t: (K,) strictly increasing times [s]; volts: (K, 2, *b) left/right voltages [V]
+    (``*b`` is an optional trailing batch shape, one profile per vehicle).
+    """
+
+    t: jax.Array
+    volts: jax.Array
+
+    @classmethod
+    def from_breakpoints(cls, rows, dtype=jnp.float32, source: str = "breakpoints") -> "VoltageProfile":
+        """From rows ``[t, v_left, v_right]``."""
+        arr = np.asarray(rows, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != 3:
+            raise ValueError(f"{source}: expected rows [t, v_left, v_right], got an array of shape {arr.shape}")
+        return cls.from_arrays(arr[:, 0], arr[:, 1:], dtype=dtype, source=source)
+
+    @classmethod
+    def from_arrays(cls, t, volts, dtype=jnp.float32, source: str = "profile") -> "VoltageProfile":
+        """From times (K,) and voltages (K, 2[, *b]); validated (see :func:`validate_profile`)."""
+        t = np.asarray(t, dtype=np.float64)
+        volts = np.asarray(volts, dtype=np.float64)
+        validate_profile(t, volts, source=source)
+        if t.shape[0] == 1:  # a single sample: hold it
+            t = np.concatenate([t, t + 1.0])
+            volts = np.concatenate([volts, volts])
+        return cls(jnp.asarray(t, dtype), jnp.asarray(volts, dtype))
+
+    @classmethod
+    def constant(cls, v_left: float, v_right: float, dtype=jnp.float32) -> "VoltageProfile":
+        """Constant voltages from t = 0."""
+        return cls.from_arrays([0.0, 1.0], [[v_left, v_right], [v_left, v_right]], dtype=dtype, source="constant")
+
+    def __call__(self, t):
+        """Voltages at times ``t`` (any shape S): returns (*S, 2, *b)."""
+        return interpolate(self.t, self.volts, t)
+
+
+def validate_profile(t, volts, limit: float = 24.0, source: str = "profile") -> None:
+    """Raise ``ValueError`` naming the sample and channel for a bad profile."""
+    if t.ndim != 1 or t.shape[0] < 1:
+        raise ValueError(f"{source}: time must be a 1-D array with at least one sample, got shape {t.shape}")
+    if volts.ndim < 2 or volts.shape[0] != t.shape[0] or volts.shape[1] != 2:
+        raise ValueError(
+            f"{source}: voltages must have shape (K, 2[, batch]) with K = {t.shape[0]} samples, got {volts.shape}"
+        )
+    if not np.all(np.isfinite(t)):
+        k = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise ValueError(f"{source}: time is not finite at sample {k} (t = {t[k]})")
+    bad = np.diff(t) <= 0
+    if np.any(bad):
+        k = int(np.flatnonzero(bad)[0]) + 1
+        raise ValueError(f"{source}: time is not strictly increasing at sample {k} (t = {t[k - 1]} then {t[k]})")
+    for ch, name in enumerate(("v_left", "v_right")):
+        v = volts[:, ch]
+        nonfinite = ~np.isfinite(v)
+        if np.any(nonfinite):
+            k = int(np.argwhere(nonfinite)[0][0])
+            raise ValueError(f"{source}: voltage '{name}' is not finite at sample {k} (t = {t[k]} s)")
+        over = np.abs(v) > limit + 1e-9
+        if np.any(over):
+            k = int(np.argwhere(over)[0][0])
+            raise ValueError(
+                f"{source}: voltage '{name}' = {float(np.ravel(v[k])[0]):.3f} V at sample {k} (t = {t[k]} s) exceeds "
+                f"the ±{limit:g} V bus limit (profiles are rejected, not clipped; clip them yourself if intended)"
+            )
+
+
+def interpolate(tp, vp, t):
+    """Linear interpolation of ``vp`` (K, ...) at times ``t`` (any shape S) -> (*S, ...); held at the ends."""
+    k = tp.shape[0]
+    idx = jnp.clip(jnp.searchsorted(tp, t, side="right") - 1, 0, k - 2)
+    t0, t1 = tp[idx], tp[idx + 1]
+    w = jnp.clip((t - t0) / (t1 - t0), 0.0, 1.0)
+    w = w.reshape(w.shape + (1,) * (vp.ndim - 1))
+    return vp[idx] * (1.0 - w) + vp[idx + 1] * w
+
+
+class Trajectory(eqx.Module):
+    """Result of :func:`simulate`. Time is the leading axis of every array (n_steps + 1 samples).
+
+    t: (T,) [s]; state: :class:`State` with leading T axis; channels: instrument channels
+    (``trackenv.instruments.CHANNELS``), each (T, *b), SI; voltage: (T, 2, *b) [V];
+    diverged: (*b) bool; t_diverged: (*b) time of the first non-finite state [s] (NaN if none).
+    After divergence the state is frozen at its last finite value and ``diverged`` is set.
+    """
+
+    t: jax.Array
+    state: State
+    channels: dict
+    voltage: jax.Array
+    diverged: jax.Array
+    t_diverged: jax.Array
+
+
+def n_substeps(dt: float, substep: float) -> int:
+    """Substeps per control step so that the substep is at most ``substep``."""
+    return max(1, int(math.ceil(dt / substep - 1e-9)))
+
+
+def simulate_core(params, profile: VoltageProfile, state0: State, n_steps: int, dt: float, substeps: int,
+                  t0: float = 0.0, unroll: int = 1) -> Trajectory:
+    """Pure simulation core (no validation): jit/vmap/grad-able. See :func:`simulate`."""
+    dtype = params.dtype
+    h = dt / substeps
+    nb = state0.vel.ndim - 1
+    # Voltages at every half substep, then grouped as (start, middle, end) of each substep.
+    half = t0 + jnp.arange(2 * n_steps * substeps + 1, dtype=dtype) * (0.5 * h)
+    v_half = profile(half)  # (M, 2, *b)
+    idx = (2 * jnp.arange(n_steps * substeps))[:, None] + jnp.arange(3)[None]
+    v3 = v_half[idx].reshape((n_steps, substeps, 3) + v_half.shape[1:])
+
+    def control_step(carry, v_sub):
+        state, diverged, t_div, k = carry
+        new = advance(state, v_sub, params, h, unroll=unroll)
+        ok = is_finite(new, nb)
+        newly = (~ok) & (~diverged)
+        t_now = t0 + (k + 1) * dt
+        t_div = jnp.where(newly, t_now, t_div)
+        diverged = diverged | ~ok
+        keep = lambda n, o: jnp.where(diverged, o, n)  # noqa: E731  (freeze at the last finite state)
+        new = jax.tree.map(keep, new, state)
+        return (new, diverged, t_div, k + 1), new
+
+    batch = state0.batch_shape
+    carry0 = (state0, jnp.zeros(batch, bool), jnp.full(batch, jnp.nan, dtype), jnp.asarray(0, jnp.int32))
+    (_, diverged, t_div, _), states = jax.lax.scan(control_step, carry0, v3)
+    states = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), state0, states)
+    t = t0 + jnp.arange(n_steps + 1, dtype=dtype) * dt
+    chans = jax.vmap(lambda s: instruments.channels(s, params))(states)
+    for effect in params.effects:
+        chans = effect.instruments(chans, t, params)
+    volts = profile(t)
+    return Trajectory(t, states, chans, volts, diverged, t_div)
+
+
+_simulate_jit = jax.jit(simulate_core, static_argnames=("n_steps", "dt", "substeps", "t0", "unroll"))
+
+
+def simulate(
+    params,
+    profile: VoltageProfile,
+    t_end: float,
+    *,
+    dt: float = DEFAULT_DT,
+    substep: float = DEFAULT_SUBSTEP,
+    initial: State | None = None,
+    on_divergence: Literal["raise", "flag"] = "raise",
+) -> Trajectory:
+    """Simulate the vehicle driven by ``profile`` from rest (or ``initial``) for ``t_end`` seconds.
+
+    Args:
+        params: :class:`trackenv.params.Params` (``load_params``); its dtype sets the precision.
+        profile: a :class:`VoltageProfile` (voltages linear between samples, evaluated at every RK stage).
+        t_end: simulated duration [s]; a multiple of ``dt``.
+        dt: output interval [s] (default 0.05 s, the environments' control step).
+        substep: largest integration substep [s] (default 2 ms, from the convergence study).
+        initial: initial :class:`State` (default: at rest at the origin, heading 0).
+        on_divergence: ``"raise"`` raises :class:`SimulationDiverged` naming the time of divergence;
+            ``"flag"`` returns the trajectory with ``diverged``/``t_diverged`` set (also what happens
+            under ``jax.vmap``/``jax.jit`` tracing, where nothing can be raised).
+
+    Returns:
+        :class:`Trajectory` with the state, the instrument channels and the voltages at each ``dt``.
+    """
+    if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
+        raise ValueError(f"t_end must be a positive finite number of seconds, got {t_end!r}")
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"dt must be positive, got {dt!r}")
+    if not (substep > 0 and math.isfinite(substep)):
+        raise ValueError(f"substep must be positive, got {substep!r}")
+    n_steps = int(round(t_end / dt))
+    if abs(n_steps * dt - t_end) > 1e-9 * max(1.0, t_end) or n_steps < 1:
+        raise ValueError(f"t_end = {t_end} s is not a whole number of output steps dt = {dt} s")
+    if not isinstance(profile, VoltageProfile):
+        raise TypeError(f"profile must be a trackenv.VoltageProfile, got {type(profile).__name__}")
+    if not isinstance(profile.t, jax.core.Tracer):
+        limit = float(np.max(np.asarray(params.vehicle.voltage_limit)))
+        validate_profile(np.asarray(profile.t, np.float64), np.asarray(profile.volts, np.float64), limit)
+    dtype = params.dtype
+    profile = VoltageProfile(jnp.asarray(profile.t, dtype), jnp.asarray(profile.volts, dtype))
+    batch = profile.volts.shape[2:]
+    if initial is None:
+        initial = initial_state(params, batch)
+    substeps = n_substeps(dt, substep)
+    traj = _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps)
+    if on_divergence == "raise" and not isinstance(traj.diverged, jax.core.Tracer):
+        div = np.asarray(traj.diverged)
+        if div.any():
+            where = np.argwhere(div)
+            td = np.asarray(traj.t_diverged)[tuple(where[0])] if div.ndim else float(traj.t_diverged)
+            who = "" if div.ndim == 0 else f" (vehicle {tuple(int(i) for i in where[0])}, {int(div.sum())} of {div.size})"
+            raise SimulationDiverged(
+                f"simulation diverged: the state became non-finite at t = {float(td):.3f} s{who}; "
+                "pass on_divergence='flag' to get the trajectory up to that time"
+            )
+    elif on_divergence not in ("raise", "flag"):
+        raise ValueError(f"on_divergence must be 'raise' or 'flag', got {on_divergence!r}")
+    return traj
