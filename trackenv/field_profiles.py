@@ -167,6 +167,8 @@ def _resolve(test_id_or_path: str | Path) -> Path:
                 )
             return FIELD_DIR / f"{s}.yaml"
         path = Path(s)
+        if not path.is_file() and not path.is_absolute() and (FIELD_DIR / path).is_file():
+            path = FIELD_DIR / path  # "go_stop_dry_sand.yaml" relative to configs/field
     if not path.is_file():
         raise FieldProfileError(f"{path}: no such field-profile file")
     return path

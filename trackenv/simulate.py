@@ -34,7 +34,7 @@ from .integrate import advance, is_finite
 from .physics.model import State, initial_state
 
 DEFAULT_DT = 0.05  # s, control / output interval
-DEFAULT_SUBSTEP = 0.002  # s, chosen by the convergence study (tests/test_convergence.py, README)
+DEFAULT_SUBSTEP = 0.001  # s, chosen by the convergence study (tests/test_convergence.py, README)
 
 
 class SimulationDiverged(RuntimeError):
@@ -198,7 +198,7 @@ def simulate(
         profile: a :class:`VoltageProfile` (voltages linear between samples, evaluated at every RK stage).
         t_end: simulated duration [s]; a multiple of ``dt``.
         dt: output interval [s] (default 0.05 s, the environments' control step).
-        substep: largest integration substep [s] (default 2 ms, from the convergence study).
+        substep: largest integration substep [s] (default 1 ms, from the convergence study).
         initial: initial :class:`State` (default: at rest at the origin, heading 0).
         on_divergence: ``"raise"`` raises :class:`SimulationDiverged` naming the time of divergence;
             ``"flag"`` returns the trajectory with ``diverged``/``t_diverged`` set (also what happens

@@ -99,18 +99,27 @@ class ContactForces(NamedTuple):
     sprocket: jax.Array  # N m, extra resisting torque at each sprocket (effects), (2, *b)
 
 
-def shear_forces(terrain, kin: Kinematics, normal, jz, jx):
-    """Longitudinal and lateral shear forces at each element [N] (3.17-3.20, 3.33-3.36)."""
+def saturations(kin: Kinematics):
+    """Saturation factors of the shear displacements: j'_z = j_z S_z(|s|) (3.17), j'_x = j_x S_x(|v_y|) (3.33)."""
     sat_z = tm.step5(jnp.abs(kin.slip), SLIP_SAT_START, 0.0, SLIP_SAT_END, 1.0)[:, None]
     sat_x = tm.step5(jnp.abs(kin.lateral_velocity), LATERAL_SAT_START, 0.0, LATERAL_SAT_END, 1.0)
-    jz_sat = jz * sat_z  # (3.17)
-    jx_sat = jx * sat_x  # (3.33)
-    pressure = normal / kin.area
-    fz = tm.shear_stress(jz_sat, pressure, terrain) * kin.area  # (3.19)
-    fx = tm.shear_stress(jx_sat, pressure, terrain) * kin.area  # (3.35)
+    return sat_z, sat_x
+
+
+def forces_from_saturated(terrain, area, normal, jz_sat, jx_sat):
+    """Longitudinal and lateral element forces [N] from saturated displacements (3.19-3.20, 3.35-3.36)."""
+    pressure = normal / area
+    fz = tm.shear_stress(jz_sat, pressure, terrain) * area  # (3.19)
+    fx = tm.shear_stress(jx_sat, pressure, terrain) * area  # (3.35)
     longitudinal = tm.step5(jz_sat, -LONG_FORCE_SMOOTHING, -fz, LONG_FORCE_SMOOTHING, fz)  # (3.20)
     lateral = tm.step5(jx_sat, -LAT_FORCE_SMOOTHING, fx, LAT_FORCE_SMOOTHING, -fx)  # (3.36)
     return longitudinal, lateral
+
+
+def shear_forces(terrain, kin: Kinematics, normal, jz, jx):
+    """Longitudinal and lateral shear forces at each element [N] (3.17-3.20, 3.33-3.36)."""
+    sat_z, sat_x = saturations(kin)
+    return forces_from_saturated(terrain, kin.area, normal, jz * sat_z, jx * sat_x)
 
 
 def compaction_force(vehicle, terrain, kin: Kinematics, normal):
