@@ -3,6 +3,9 @@
     trackenv simulate go_stop_dry_sand --out out/sim       # one thesis test (reconstructed voltages)
     trackenv simulate --voltages 12,-12 --t-end 5 --terrain asphalt --out out/zrt
     trackenv demo --out out/demo                           # every thesis test: figures + summary
+    trackenv replay logs/go_stop_01 --out out/replay       # a field-log folder (MODEL.md §9) vs the model
+    trackenv replay go_stop_dry_sand --out out/r           # a thesis test (reconstructed voltages)
+    trackenv replay --list                                 # the thesis test ids
 """
 
 from __future__ import annotations
@@ -121,6 +124,75 @@ def cmd_demo(args) -> int:
     return 0
 
 
+REPLAY_HELP = """Replay a field test through the simulator and compare with what was measured.
+
+SOURCE is a field-log folder (MODEL.md §9: log.csv + meta.json) or a thesis test id
+(`trackenv replay --list`; their voltages are RECONSTRUCTED from the thesis text, not measured).
+A bare thesis id wins over a folder of the same name: write ./NAME for the folder.
+
+The logged voltages are linear between samples; the simulation starts from rest at the log's
+first sample (times are shifted to start at 0 if needed) and the simulated channels are
+compared at the log's own sample times (|i| when meta.json says current_sensor "absolute").
+
+Writes to --out: log.csv + meta.json (the simulated log, labelled synthetic), replay.png
+(simulated vs measured), metrics.json (per-channel RMSE and NRMSE = RMSE / measured range,
+or the thesis-text anchors for a thesis test). Bad input exits with code 2 and a message
+naming the file, column and row."""
+
+
+def cmd_replay(args) -> int:
+    from trackenv.field_profiles import list_field_tests, load_field_profile
+
+    if args.list:
+        print("thesis tests (voltages RECONSTRUCTED from the thesis text, not measured; configs/field):")
+        for tid in list_field_tests():
+            prof = load_field_profile(tid)
+            print(f"  {tid:28s} {prof.maneuver:17s} {prof.terrain:9s} {prof.t_end:5.1f} s")
+        return 0
+    if not args.source:
+        print("trackenv replay: error: give a field-log folder or a thesis test id (see --list)", file=sys.stderr)
+        return 2
+    from tqdm import tqdm
+
+    from trackenv.replay import replay
+
+    # a status line (stage + elapsed time) on a terminal; the simulation is one compiled call
+    stages = tqdm(desc=f"replay {args.source}", leave=False, disable=None, bar_format="{desc} [{elapsed}]")
+
+    def progress(msg: str) -> None:
+        stages.set_description_str(f"replay: {msg}")
+        stages.update(1)
+
+    t0 = time.perf_counter()
+    try:
+        res = replay(args.source, args.out, terrain=args.terrain, internal_resistance=args.internal_resistance,
+                     effects=tuple(args.effects or ()), substep=args.substep, dt=args.dt, progress=progress)
+    except OSError as exc:
+        print(f"trackenv: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        stages.close()
+    m = res.metrics
+    if res.kind == "thesis_test":
+        print(f"{res.source}: {m['note']}")
+        for a in m["anchors"]:
+            if a["simulated"] is not None:
+                print(f"  anchor {a['signal']} {a['stat']} {a['t0']:g}-{a['t1']:g} s: thesis {a['thesis_field']:g} "
+                      f"{a['unit']}, simulated {a['simulated']:.3f} ({a['rel_diff']:+.1%})")
+    else:
+        synth = " (a synthetic log)" if m["log_is_synthetic"] else ""
+        print(f"{res.source}{synth}: {m['n_samples']} samples, {m['duration_s']:.2f} s, {m['terrain']}, "
+              f"ammeter {m['current_sensor']}")
+        for ch, c in m["channels"].items():
+            nr = "n/a (constant)" if c["nrmse"] is None else f"{c['nrmse']:.4f}"
+            print(f"  {ch:12s} RMSE {c['rmse']:.4g}  NRMSE {nr}  ({c['n']} samples)")
+        if m["not_in_log"]:
+            print(f"  not in the log: {', '.join(m['not_in_log'])}")
+    files = ", ".join(str(p) for p in res.files.values())
+    print(f"wrote {files} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from trackenv.simulate import DEFAULT_SUBSTEP
 
@@ -141,6 +213,21 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="out/demo")
     d.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP)
     d.set_defaults(func=cmd_demo)
+    r = sub.add_parser("replay", help="replay a field-log folder or thesis test; compare, write log + figure",
+                       description=REPLAY_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("source", nargs="?", metavar="SOURCE", help="field-log folder or thesis test id")
+    r.add_argument("--list", action="store_true", help="list the thesis test ids and exit")
+    r.add_argument("--out", default="out/replay", help="output folder (default out/replay)")
+    r.add_argument("--terrain", help="terrain id of configs/terrain (default: meta.json's or the test's)")
+    r.add_argument("--effects", nargs="+", metavar="ID", default=(),
+                   help="MODEL.md §8 effect ids to add to the base model (none implemented yet); "
+                        "give SOURCE before this option")
+    r.add_argument("--internal-resistance", choices=("constant", "viscous"),
+                   help="internal track resistance model (default: the test's; constant for logs)")
+    r.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP, help="integration substep [s] (default 0.001)")
+    r.add_argument("--dt", type=float, default=0.05,
+                   help="largest simulation output step [s] (default 0.05; finer for faster logs)")
+    r.set_defaults(func=cmd_replay)
     return p
 
 

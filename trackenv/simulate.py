@@ -34,7 +34,7 @@ from .integrate import advance, is_finite
 from .physics.model import State, initial_state
 
 DEFAULT_DT = 0.05  # s, control / output interval
-DEFAULT_SUBSTEP = 0.001  # s, chosen by the convergence study (tests/test_convergence.py, README)
+DEFAULT_SUBSTEP = 0.0005  # s, chosen by the convergence study (tests/test_convergence.py, README)
 
 
 class SimulationDiverged(RuntimeError):
@@ -198,7 +198,7 @@ def simulate(
         profile: a :class:`VoltageProfile` (voltages linear between samples, evaluated at every RK stage).
         t_end: simulated duration [s]; a multiple of ``dt``.
         dt: output interval [s] (default 0.05 s, the environments' control step).
-        substep: largest integration substep [s] (default 1 ms, from the convergence study).
+        substep: largest integration substep [s] (default 0.5 ms, from the convergence study).
         initial: initial :class:`State` (default: at rest at the origin, heading 0).
         on_divergence: ``"raise"`` raises :class:`SimulationDiverged` naming the time of divergence;
             ``"flag"`` returns the trajectory with ``diverged``/``t_diverged`` set (also what happens
@@ -216,6 +216,8 @@ def simulate(
     n_steps = int(round(t_end / dt))
     if abs(n_steps * dt - t_end) > 1e-9 * max(1.0, t_end) or n_steps < 1:
         raise ValueError(f"t_end = {t_end} s is not a whole number of output steps dt = {dt} s")
+    if on_divergence not in ("raise", "flag"):
+        raise ValueError(f"on_divergence must be 'raise' or 'flag', got {on_divergence!r}")
     if not isinstance(profile, VoltageProfile):
         raise TypeError(f"profile must be a trackenv.VoltageProfile, got {type(profile).__name__}")
     if not isinstance(profile.t, jax.core.Tracer):
@@ -238,6 +240,4 @@ def simulate(
                 f"simulation diverged: the state became non-finite at t = {float(td):.3f} s{who}; "
                 "pass on_divergence='flag' to get the trajectory up to that time"
             )
-    elif on_divergence not in ("raise", "flag"):
-        raise ValueError(f"on_divergence must be 'raise' or 'flag', got {on_divergence!r}")
     return traj

@@ -1,0 +1,452 @@
+"""Field logs: read, validate and write the MODEL.md §9 format (a folder with ``log.csv`` + ``meta.json``).
+
+    from trackenv.fieldlog import read_field_log, write_field_log
+    log = read_field_log("logs/zrt_sand_03")      # FieldLog; raises FieldLogError on bad input
+    log.t, log.volts, log.measured()              # (K,), (K, 2), {"i_left": (K,), ...} with NaN gaps
+    write_field_log("out/sim", traj, {"terrain": "dry_sand", "maneuver": "go_stop"})
+
+``log.csv``: a header row, then one row per sample (any rate, regular or not). Columns (SI):
+
+=============== ======== =========================================================================
+column          unit     rule
+=============== ======== =========================================================================
+``t``           s        required; every row; strictly increasing (no duplicates); need not start at 0
+``v_left``      V        required; every row (the replay input); \\|V\\| <= the vehicle's bus limit (24 V)
+``v_right``     V        as ``v_left``
+``i_left``      A        required in the header; empty cells are missing samples; >= 0 if the
+                         ammeter is ``absolute``
+``i_right``     A        as ``i_left``
+``speed_ideal`` m/s      required in the header; empty cells allowed (encoder r_s (ω_l+ω_r)/2)
+``yaw_rate``    rad/s    required in the header; empty cells allowed (gyro)
+``x``, ``y``    m        optional; empty cells allowed
+``heading``     rad      optional; empty cells allowed
+=============== ======== =========================================================================
+
+A measurement column may be entirely empty (a channel that was not logged), but it must be in the
+header, so that a missing channel is a decision and never a typo. Empty cells, ``nan``, ``NA`` and
+``null`` all mean "missing". Other columns are allowed, kept in :attr:`FieldLog.data` as text and
+otherwise ignored. Blank lines are skipped. At least 2 samples.
+
+``meta.json``: a JSON object with ``terrain`` (required; an id of ``configs/terrain``),
+``maneuver`` (required; ``go_stop`` | ``j_turn`` | ``lane_change`` | ``zero_radius_turn`` or free
+text), ``current_sensor`` (required; ``"absolute"``, the thesis's ammeter that reports \\|i\\|, or
+``"signed"``), ``vehicle`` (optional, default ``packbot``; an id of ``configs/vehicle``), ``notes``
+(optional text). Further keys are allowed, kept in :attr:`FieldLog.meta` and ignored. Logs written
+from a simulation carry ``"synthetic": true`` and a ``"source"``.
+
+Every error is a :class:`FieldLogError` (a ``ValueError``) whose message names the file, and for
+``log.csv`` the column and the row as ``line L (data row R)``: L is the 1-based line number of the
+CSV file (the header is line 1) and R = L - 1 is the 1-based data row.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "FieldLogError",
+    "FieldLog",
+    "read_field_log",
+    "write_field_log",
+    "write_log_columns",
+    "validate_meta",
+    "REQUIRED_COLUMNS",
+    "INPUT_COLUMNS",
+    "MEASURED_COLUMNS",
+    "OPTIONAL_COLUMNS",
+    "LOG_COLUMNS",
+    "MANEUVERS",
+    "CURRENT_SENSORS",
+]
+
+INPUT_COLUMNS = ("t", "v_left", "v_right")  # must be present in every row
+MEASURED_COLUMNS = ("i_left", "i_right", "speed_ideal", "yaw_rate")  # in the header; cells may be empty
+REQUIRED_COLUMNS = INPUT_COLUMNS + MEASURED_COLUMNS
+OPTIONAL_COLUMNS = ("x", "y", "heading")  # may be absent from the header
+LOG_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
+MANEUVERS = ("go_stop", "j_turn", "lane_change", "zero_radius_turn")  # known; free text is accepted too
+CURRENT_SENSORS = ("absolute", "signed")
+_MISSING = ("", "nan", "na", "n/a", "null", "none")
+
+
+class FieldLogError(ValueError):
+    """A field log is missing or invalid; the message names the file, and the column and row."""
+
+
+@dataclass(frozen=True, eq=False)
+class FieldLog:
+    """One field test read from a §9 folder.
+
+    ``data`` holds the log's columns in file order (the §9 columns as float64, NaN = missing sample;
+    any other column as text); ``meta`` the validated ``meta.json`` (``vehicle`` filled in with its
+    default). ``eq=False``: DataFrames have no scalar ==.
+    """
+
+    folder: Path
+    data: pd.DataFrame
+    meta: dict
+
+    @property
+    def t(self) -> np.ndarray:
+        """(K,) sample times [s] as logged (not shifted to start at 0)."""
+        return self.data["t"].to_numpy(np.float64)
+
+    @property
+    def volts(self) -> np.ndarray:
+        """(K, 2) motor voltages [v_left, v_right] [V]."""
+        return self.data[["v_left", "v_right"]].to_numpy(np.float64)
+
+    @property
+    def terrain(self) -> str:
+        return self.meta["terrain"]
+
+    @property
+    def maneuver(self) -> str:
+        return self.meta["maneuver"]
+
+    @property
+    def current_sensor(self) -> str:
+        return self.meta["current_sensor"]
+
+    @property
+    def vehicle(self) -> str:
+        return self.meta["vehicle"]
+
+    @property
+    def synthetic(self) -> bool:
+        """True if the log says it was written from a simulation (``"synthetic": true``)."""
+        return self.meta.get("synthetic") is True
+
+    def measured(self) -> dict[str, np.ndarray]:
+        """The measurement channels (§9 measured and optional columns) that have at least one sample.
+
+        Returns ``{column: (K,) float64}`` with NaN where a sample is missing.
+        """
+        out = {}
+        for col in MEASURED_COLUMNS + OPTIONAL_COLUMNS:
+            if col in self.data.columns:
+                v = self.data[col].to_numpy(np.float64)
+                if np.any(np.isfinite(v)):
+                    out[col] = v
+        return out
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    def __repr__(self) -> str:
+        t = self.t
+        return (f"FieldLog({str(self.folder)!r}, {len(self)} samples, t = {t[0]:g}..{t[-1]:g} s, "
+                f"terrain={self.terrain!r}, maneuver={self.maneuver!r}, current_sensor={self.current_sensor!r}, "
+                f"measured={list(self.measured())})")
+
+
+# ----------------------------------------------------------------------------------------------
+# meta.json
+
+
+def validate_meta(meta: Any, where: str = "meta.json") -> dict:
+    """Check a ``meta.json`` mapping (MODEL.md §9) and return a copy with defaults filled in.
+
+    Raises :class:`FieldLogError` naming ``where`` and the key.
+    """
+    from .params import list_terrains, list_vehicles
+
+    if not isinstance(meta, dict):
+        raise FieldLogError(f"{where}: the top level must be a JSON object {{...}}, got {type(meta).__name__}")
+    meta = dict(meta)
+    for key in ("terrain", "maneuver", "current_sensor"):
+        if key not in meta:
+            raise FieldLogError(f"{where}: missing required key '{key}' (required: terrain, maneuver, current_sensor)")
+    terrain = meta["terrain"]
+    known = list_terrains()
+    if not isinstance(terrain, str) or terrain not in known:
+        raise FieldLogError(f"{where}: key 'terrain' = {terrain!r} is not a known terrain id "
+                            f"(known: {', '.join(known)})")
+    maneuver = meta["maneuver"]
+    if not isinstance(maneuver, str) or not maneuver.strip():
+        raise FieldLogError(f"{where}: key 'maneuver' must be a non-empty string ({' | '.join(MANEUVERS)} or free "
+                            f"text), got {maneuver!r}")
+    sensor = meta["current_sensor"]
+    if sensor not in CURRENT_SENSORS:
+        raise FieldLogError(f"{where}: key 'current_sensor' = {sensor!r} must be \"absolute\" (the ammeter reports "
+                            f"|i|, as in the thesis) or \"signed\"")
+    vehicle = meta.setdefault("vehicle", "packbot")
+    vehicles = list_vehicles()
+    if not isinstance(vehicle, str) or vehicle not in vehicles:
+        raise FieldLogError(f"{where}: key 'vehicle' = {vehicle!r} is not a known vehicle id "
+                            f"(known: {', '.join(vehicles)})")
+    if "notes" in meta and not isinstance(meta["notes"], str):
+        raise FieldLogError(f"{where}: key 'notes' must be a string, got {type(meta['notes']).__name__}")
+    return meta
+
+
+def _read_meta(path: Path) -> dict:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FieldLogError(f"{path}: not UTF-8 text ({exc})") from None
+    try:
+        meta = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise FieldLogError(f"{path}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    return validate_meta(meta, str(path))
+
+
+# ----------------------------------------------------------------------------------------------
+# log.csv
+
+
+def _voltage_limit(vehicle: str) -> float:
+    from .params import load_vehicle
+
+    return float(np.max(np.asarray(load_vehicle(vehicle).voltage_limit)))
+
+
+def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FieldLogError(f"{path}: not UTF-8 text ({exc})") from None
+    reader = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True)
+    header: list[str] | None = None
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    try:
+        for fields in reader:
+            if not fields or all(not f.strip() for f in fields):
+                continue  # blank line
+            if header is None:
+                header = [f.strip() for f in fields]
+                header_line = reader.line_num
+                if header_line != 1:
+                    raise FieldLogError(f"{path}: line {header_line}: the header row must be line 1")
+                continue
+            if len(fields) != len(header):
+                raise FieldLogError(
+                    f"{path}: line {reader.line_num} (data row {reader.line_num - 1}) has {len(fields)} fields but "
+                    f"the header has {len(header)} ({','.join(header)})")
+            rows.append(fields)
+            lines.append(reader.line_num)
+    except csv.Error as exc:
+        raise FieldLogError(f"{path}: line {reader.line_num}: malformed CSV ({exc})") from None
+    if header is None:
+        raise FieldLogError(f"{path}: empty file: expected a header row {','.join(REQUIRED_COLUMNS)} and data rows")
+    for i, name in enumerate(header):
+        if not name:
+            raise FieldLogError(f"{path}: line 1 (header): column {i + 1} has an empty name")
+        if name in header[:i]:
+            raise FieldLogError(f"{path}: line 1 (header): column '{name}' appears twice")
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise FieldLogError(
+            f"{path}: line 1 (header): missing required column(s) {', '.join(repr(c) for c in missing)} "
+            f"(required: {','.join(REQUIRED_COLUMNS)}; a channel that was not logged stays in the header with "
+            f"empty cells)")
+    if len(rows) < 2:
+        raise FieldLogError(f"{path}: column 't': {len(rows)} data row(s); a log needs at least 2 samples")
+
+    raw = pd.DataFrame(rows, columns=header)
+    line = np.asarray(lines)
+
+    def where(col: str, k: int) -> str:
+        return f"{path}: column '{col}', line {line[k]} (data row {line[k] - 1})"
+
+    data = {}
+    for col in header:
+        if col not in LOG_COLUMNS:
+            data[col] = raw[col].str.strip()  # extra columns: kept as text, ignored
+            continue
+        s = raw[col].str.strip()
+        empty = s.str.lower().isin(_MISSING).to_numpy()
+        vals = pd.to_numeric(s.where(~empty, None), errors="coerce").to_numpy(np.float64)
+        bad = ~empty & ~np.isfinite(vals)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise FieldLogError(f"{where(col, k)}: {s.iloc[k]!r} is not a finite number")
+        if col in INPUT_COLUMNS and empty.any():
+            k = int(np.flatnonzero(empty)[0])
+            what = "time" if col == "t" else "voltage"
+            raise FieldLogError(f"{where(col, k)}: the {what} is missing ({s.iloc[k]!r}); '{col}' must be present in "
+                                f"every row (voltages are the replay input, linear between samples)")
+        data[col] = vals
+    df = pd.DataFrame(data, columns=header)
+
+    t = df["t"].to_numpy()
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        k = int(np.flatnonzero(dt <= 0)[0]) + 1
+        kind = "duplicate time" if dt[k - 1] == 0 else "time goes backwards"
+        raise FieldLogError(f"{where('t', k)}: t = {t[k]!r} s is not greater than t = {t[k - 1]!r} s at line "
+                            f"{line[k - 1]} ({kind}); t must be strictly increasing")
+    limit = _voltage_limit(meta["vehicle"])
+    for col in ("v_left", "v_right"):
+        over = np.abs(df[col].to_numpy()) > limit + 1e-9
+        if over.any():
+            k = int(np.flatnonzero(over)[0])
+            raise FieldLogError(f"{where(col, k)}: |V| = {abs(df[col].iloc[k]):g} V exceeds the ±{limit:g} V bus "
+                                f"limit of vehicle '{meta['vehicle']}'")
+    if meta["current_sensor"] == "absolute":
+        for col in ("i_left", "i_right"):
+            neg = df[col].to_numpy() < 0  # NaN compares False
+            if neg.any():
+                k = int(np.flatnonzero(neg)[0])
+                raise FieldLogError(
+                    f"{where(col, k)}: current {df[col].iloc[k]:g} A is negative, but meta.json says "
+                    f"current_sensor = \"absolute\" (an ammeter that reports |i|); set \"signed\" if it measured "
+                    f"signed currents")
+    return df
+
+
+def read_field_log(folder: str | Path) -> FieldLog:
+    """Read and validate a field-log folder (``log.csv`` + ``meta.json``, MODEL.md §9).
+
+    Raises :class:`FieldLogError` naming the file, and for ``log.csv`` the column and the row
+    (``line L (data row R)``: CSV line, header = line 1; data row R = L - 1).
+    """
+    folder = Path(folder)
+    if not folder.exists():
+        raise FieldLogError(f"{folder}: no such field-log folder (expected a folder with log.csv and meta.json)")
+    if not folder.is_dir():
+        raise FieldLogError(f"{folder}: not a folder (a field log is a folder with log.csv and meta.json)")
+    log_path, meta_path = folder / "log.csv", folder / "meta.json"
+    for p in (log_path, meta_path):
+        if not p.is_file():
+            raise FieldLogError(f"{p}: missing file (a field-log folder holds log.csv and meta.json, MODEL.md §9)")
+    meta = _read_meta(meta_path)
+    data = _read_csv(log_path, meta)
+    return FieldLog(folder=folder, data=data, meta=meta)
+
+
+# ----------------------------------------------------------------------------------------------
+# writing
+
+
+def _fmt(x: float) -> str:
+    return "" if not math.isfinite(x) else f"{x:.8g}"
+
+
+def write_log_columns(folder: str | Path, columns: dict, meta: dict) -> tuple[Path, Path]:
+    """Write ``log.csv`` and ``meta.json`` from ``{column: (K,) array}`` (NaN = missing) and a meta dict.
+
+    Columns are written in §9 order (``t`` first), then any others. ``meta`` is validated
+    (:func:`validate_meta`). Times are written with 15 significant digits, the other columns with
+    8 (float32 precision). Returns the two paths.
+    """
+    folder = Path(folder)
+    meta = validate_meta(meta, f"{folder / 'meta.json'} (to be written)")
+    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    if missing:
+        raise ValueError(f"write_log_columns: missing column(s) {missing}")
+    order = [c for c in LOG_COLUMNS if c in columns] + [c for c in columns if c not in LOG_COLUMNS]
+    df = pd.DataFrame({c: np.asarray(columns[c], np.float64) for c in order})
+    for c in INPUT_COLUMNS:
+        if not np.all(np.isfinite(df[c])):
+            raise ValueError(f"write_log_columns: column '{c}' has non-finite values")
+    if np.any(np.diff(df["t"].to_numpy()) <= 0):
+        raise ValueError("write_log_columns: t must be strictly increasing")
+    out = pd.DataFrame({c: [f"{x:.15g}" for x in df[c]] if c == "t" else [_fmt(x) for x in df[c]] for c in order})
+    folder.mkdir(parents=True, exist_ok=True)
+    log_path, meta_path = folder / "log.csv", folder / "meta.json"
+    out.to_csv(log_path, index=False, lineterminator="\n")
+    meta_path.write_text(json.dumps(meta, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    return log_path, meta_path
+
+
+def _float64_times(t32: np.ndarray) -> np.ndarray:
+    """The float64 times of a uniform float32 grid ``t0 + k dt`` (removes float32 noise), else as given."""
+    t = np.asarray(t32, np.float64)
+    n = t.shape[0]
+    if n < 3:
+        return t
+    step = (t[-1] - t[0]) / (n - 1)
+    if not np.allclose(np.diff(t), step, rtol=1e-3, atol=0):
+        return t
+    nice = float(f"{step:.6g}")
+    step = nice if abs(nice - step) <= 1e-6 * step else step
+    t0 = float(f"{t[0]:.6g}") if abs(t[0]) < 1e6 else t[0]
+    t64 = t0 + np.arange(n) * step
+    return t64 if np.allclose(t64, t, rtol=0, atol=1e-5 * max(1.0, abs(t[-1]))) else t
+
+
+def write_field_log(
+    folder: str | Path,
+    traj,
+    meta: dict,
+    current_sensor: str = "absolute",
+    channels_optional: bool = True,
+    *,
+    times=None,
+    profile=None,
+    t_offset: float = 0.0,
+) -> FieldLog:
+    """Write a single-vehicle :class:`~trackenv.simulate.Trajectory` as a §9 field log; returns it read back.
+
+    Args:
+        folder: the log folder (created; ``log.csv`` and ``meta.json`` are overwritten).
+        traj: a single-vehicle trajectory from :func:`trackenv.simulate` (no batch axes, not diverged).
+        meta: ``meta.json`` content; needs ``terrain`` and ``maneuver``. ``vehicle`` defaults to
+            ``packbot``. ``"synthetic": true`` is always set and ``"source"`` defaults to
+            ``"trackenv.simulate"``, so a simulated log is never mistaken for a measured one.
+        current_sensor: ``"absolute"`` writes |i| (the thesis's ammeter, ``instruments.ammeter``),
+            ``"signed"`` the signed currents; recorded in ``meta.json``.
+        channels_optional: also write the optional pose columns ``x``, ``y``, ``heading``.
+        times: sample times (in the trajectory's time base) to write instead of the trajectory's own
+            grid; channels are interpolated linearly between trajectory samples, so times on the grid
+            are exact.
+        profile: the :class:`~trackenv.simulate.VoltageProfile` that drove ``traj``: voltages are then
+            evaluated from it in float64 (otherwise taken from the trajectory, float32, and with
+            ``times`` interpolated between its samples, which cuts the corners of a profile whose
+            breakpoints fall between them).
+        t_offset: added to the written times (e.g. to restore a log's own time base).
+    """
+    from .instruments import ammeter
+
+    if current_sensor not in CURRENT_SENSORS:
+        raise ValueError(f"current_sensor must be 'absolute' or 'signed', got {current_sensor!r}")
+    if "current_sensor" in meta and meta["current_sensor"] != current_sensor:
+        raise ValueError(f"meta says current_sensor = {meta['current_sensor']!r} but current_sensor = "
+                         f"{current_sensor!r} was passed")
+    volts = np.asarray(traj.voltage, np.float64)
+    if volts.ndim != 2:
+        raise ValueError(f"write_field_log needs a single-vehicle trajectory; got voltages of shape {volts.shape} "
+                         "(index the batch first)")
+    if bool(np.asarray(traj.diverged)):
+        raise ValueError(f"the trajectory diverged at t = {float(np.asarray(traj.t_diverged)):.3f} s; not writing it")
+    tg = _float64_times(np.asarray(traj.t))
+    ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
+    ch["i_left"] = np.asarray(ammeter(ch["i_left"], current_sensor), np.float64)
+    ch["i_right"] = np.asarray(ammeter(ch["i_right"], current_sensor), np.float64)
+    names = list(MEASURED_COLUMNS) + (list(OPTIONAL_COLUMNS) if channels_optional else [])
+    if times is None:
+        t = tg
+        vl, vr = volts[:, 0], volts[:, 1]
+        cols = {c: ch[c] for c in names}
+    else:
+        t = np.asarray(times, np.float64)
+        if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0):
+            raise ValueError("times must be a strictly increasing 1-D array of at least 2 samples")
+        if t[0] < tg[0] - 1e-9 or t[-1] > tg[-1] + 1e-9:
+            raise ValueError(f"times {t[0]:g}..{t[-1]:g} s lie outside the trajectory's {tg[0]:g}..{tg[-1]:g} s")
+        vl, vr = np.interp(t, tg, volts[:, 0]), np.interp(t, tg, volts[:, 1])
+        cols = {c: np.interp(t, tg, ch[c]) for c in names}
+    if profile is not None:  # exact voltages (float64) from the profile's breakpoints
+        pt, pv = np.asarray(profile.t, np.float64), np.asarray(profile.volts, np.float64)
+        if pv.ndim != 2:
+            raise ValueError("profile must be a single-vehicle VoltageProfile")
+        vl, vr = np.interp(t, pt, pv[:, 0]), np.interp(t, pt, pv[:, 1])
+    cols = {"t": t + t_offset, "v_left": vl, "v_right": vr, **cols}
+    meta = dict(meta)
+    meta["current_sensor"] = current_sensor
+    meta["synthetic"] = True
+    meta.setdefault("source", "trackenv.simulate")
+    write_log_columns(folder, cols, meta)
+    return read_field_log(folder)
