@@ -16,7 +16,7 @@ demo: $(STAMP)
 	$(BIN)/trackenv demo --out out/demo
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --nbmake tests notebooks
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_simulate.py

@@ -15,3 +15,8 @@ __all__ = [
     "State", "initial_state", "SimulationDiverged", "Trajectory", "VoltageProfile", "simulate",
 ]
 __version__ = "0.1.0"
+
+try:  # registers trackenv/GoStop-v0, JTurn-v0, LaneChange-v0, ZeroRadiusTurn-v0 with Gymnasium
+    from . import envs  # noqa: E402,F401
+except ImportError:  # pragma: no cover - gymnasium missing: the simulator still works
+    pass

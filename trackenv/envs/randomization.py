@@ -1,0 +1,141 @@
+"""Domain randomisation: per-episode sampling of terrain and vehicle parameters (jit/vmap-able).
+
+``domain_randomization=True`` samples the default ranges below, uniformly and independently, at every
+reset; a dict ``{"terrain.cohesion": (low, high), ...}`` (dotted :class:`trackenv.params.Params`
+paths, SI units, angles in radians) sets custom ranges (a plain number pins a parameter); ``False``
+(default) keeps the nominal terrain. Sampling uses ``jax.random`` inside ``reset``, so a batch of
+environments draws independent parameters in one vmapped call.
+
+Default ranges, deformable terrains (dry sand and the sandy soils of Table 5.5):
+
+====================  ================  =====================================================
+terrain.cohesion      0 - 3.04 kPa      Table 5.5 (dry sand 2: 0) to Table 5.6's largest c
+terrain.friction_angle 23 - 38 deg      Table 5.6's smallest phi to Table 5.5 (sandy loam 3)
+terrain.shear_modulus 0.010 - 0.0508 m  Table 5.5 (sandy loams: 1 cm) to Table 5.6's K = 2 in
+internal.constant     0.73 - 1.17 N m   Table 5.4 (asphalt 0.73) to Table 5.6's second b*_int
+vehicle.mass          16.3 - 20.0 kg    +-10 % of 18.144 kg: NOT in the thesis (payload, batteries)
+====================  ================  =====================================================
+
+Hard ground (asphalt, non-deformable): the thesis gives one asphalt (Table 5.2) and no spans, so the
+ranges are relative to the loaded terrain and are guesses: friction angle x [0.85, 1.15], shear
+modulus K x [0.55, 1.45], b*_int x [0.94, 1.5] (the same relative span as the sand range above),
+mass +-10 %. The yaw inertia is not rescaled with the mass.
+
+Only constant-model internal resistance is randomised by default; with the viscous model
+(``internal_resistance="viscous"``) ``internal.viscous`` is scaled x [0.94, 1.5] instead.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..params import ConfigError, Params
+
+_SAND = {
+    "terrain.cohesion": (0.0, 3040.0),
+    "terrain.friction_angle": (math.radians(23.0), math.radians(38.0)),
+    "terrain.shear_modulus": (0.010, 0.0508),
+    "internal.constant": (0.73, 1.17),
+}
+_HARD_REL = {
+    "terrain.friction_angle": (0.85, 1.15),
+    "terrain.shear_modulus": (0.55, 1.45),
+    "internal.constant": (0.94, 1.5),
+}
+_MASS_REL = (0.9, 1.1)
+
+
+def _leaf(params: Params, path: str):
+    node = params
+    for part in path.split("."):
+        if isinstance(node, (tuple, list)):
+            try:
+                node = node[int(part)]
+            except (ValueError, IndexError):
+                raise ConfigError(f"domain randomisation: unknown parameter '{path}'") from None
+        elif hasattr(node, part):
+            node = getattr(node, part)
+        else:
+            raise ConfigError(f"domain randomisation: unknown parameter '{path}'")
+    if not isinstance(node, (jax.Array, np.ndarray)) or not jnp.issubdtype(node.dtype, jnp.floating):
+        raise ConfigError(f"domain randomisation: parameter '{path}' is not a floating-point leaf")
+    return node
+
+
+def _getter(path: str):
+    parts = path.split(".")
+
+    def where(p):
+        for part in parts:
+            p = p[int(part)] if isinstance(p, (tuple, list)) else getattr(p, part)
+        return p
+
+    return where
+
+
+def default_ranges(params: Params) -> dict[str, tuple[float, float]]:
+    """The default ranges for ``params``'s terrain (see the module docstring)."""
+    out: dict[str, tuple[float, float]] = {}
+    deformable = float(params.terrain.deformable) > 0.5
+    viscous = float(params.internal.viscous) > 0.0 and float(params.internal.constant) == 0.0
+    if deformable:
+        out.update({k: v for k, v in _SAND.items() if not (viscous and k == "internal.constant")})
+    else:
+        for k, (a, b) in _HARD_REL.items():
+            if viscous and k == "internal.constant":
+                continue
+            nominal = float(_leaf(params, k))
+            out[k] = (a * nominal, b * nominal)
+    if viscous:
+        nominal = float(params.internal.viscous)
+        out["internal.viscous"] = (0.94 * nominal, 1.5 * nominal)
+    m = float(params.vehicle.mass)
+    out["vehicle.mass"] = (_MASS_REL[0] * m, _MASS_REL[1] * m)
+    return out
+
+
+def resolve(params: Params, spec: Any) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """``domain_randomization`` option -> (paths, low, high), validated."""
+    if spec is None or spec is False:
+        return (), np.zeros(0, np.float32), np.zeros(0, np.float32)
+    if spec is True:
+        spec = default_ranges(params)
+    if not isinstance(spec, dict):
+        raise ConfigError(f"domain_randomization must be True, False or a dict of ranges, got {spec!r}")
+    paths, lows, highs = [], [], []
+    for path, rng in spec.items():
+        leaf = _leaf(params, path)
+        if leaf.ndim != 0:
+            raise ConfigError(f"domain randomisation: parameter '{path}' is not a scalar")
+        if isinstance(rng, (int, float)) and not isinstance(rng, bool):
+            lo = hi = float(rng)
+        else:
+            try:
+                lo, hi = (float(v) for v in rng)
+            except (TypeError, ValueError):
+                raise ConfigError(f"domain randomisation: range for '{path}' must be (low, high), got {rng!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+            raise ConfigError(f"domain randomisation: range for '{path}' = {rng!r} needs finite low <= high")
+        paths.append(path)
+        lows.append(lo)
+        highs.append(hi)
+    return tuple(paths), np.asarray(lows, np.float32), np.asarray(highs, np.float32)
+
+
+def sample(params: Params, key, paths: tuple[str, ...], low, high) -> tuple[Params, jax.Array]:
+    """Draw one parameter set; returns the new params and the sampled values (n,)."""
+    if not paths:
+        return params, jnp.zeros((0,), jnp.float32)
+    u = jax.random.uniform(key, (len(paths),), jnp.float32)
+    values = low + u * (high - low)
+    for i, path in enumerate(paths):
+        where = _getter(path)
+        old = where(params)
+        params = eqx.tree_at(where, params, values[i].astype(old.dtype))
+    return params, values
