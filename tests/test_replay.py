@@ -166,8 +166,8 @@ def test_bad_source(tmp_path):
         replay("no_such_test", tmp_path / "o")
     with pytest.raises(FieldLogError, match="no such field-log folder"):
         replay(tmp_path / "missing", tmp_path / "o")
-    with pytest.raises(te.ConfigError, match="unknown effect id 'slip_sinkage'"):
-        replay("go_stop_dry_sand", tmp_path / "o", effects=("slip_sinkage",))
+    with pytest.raises(te.ConfigError, match="unknown effect id 'slip_sunkage'"):
+        replay("go_stop_dry_sand", tmp_path / "o", effects=("slip_sunkage",))
 
 
 # ---------------------------------------------------------------------------------------------- CLI

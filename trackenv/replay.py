@@ -49,12 +49,10 @@ import numpy as np
 from .fieldlog import FieldLog, FieldLogError, read_field_log, write_field_log, write_log_columns
 from .simulate import DEFAULT_DT, DEFAULT_SUBSTEP
 
-__all__ = ["replay", "ReplayResult", "resolve_effects", "is_thesis_test", "RECONSTRUCTED_NOTE", "EFFECT_CANDIDATES"]
+__all__ = ["replay", "ReplayResult", "resolve_effects", "is_thesis_test", "RECONSTRUCTED_NOTE"]
 
 RECONSTRUCTED_NOTE = ("voltages RECONSTRUCTED from the thesis text (configs/field), not measured; "
                       "simulated with the base model; no field log exists to compare with")
-EFFECT_CANDIDATES = ("slip_sinkage", "lateral_friction_radius", "internal_resistance", "grouser_stiction",
-                     "pitch_load_transfer", "sensor_artifacts")  # MODEL.md §8
 COMPARED = ("i_left", "i_right", "speed_ideal", "yaw_rate", "x", "y", "heading")
 
 
@@ -81,32 +79,14 @@ class ReplayResult:
 
 
 def resolve_effects(effects) -> tuple:
-    """Effect ids (MODEL.md §8) or effect modules -> modules for ``load_params(effects=...)``.
-
-    No effect is implemented yet: any id raises ``ConfigError("unknown effect id ...")``. Once
-    ``trackenv.effects`` provides ``get_effect(id)``, ids are looked up there.
-    """
+    """Effect ids (MODEL.md §8) or effect modules -> modules; a bad id raises :class:`ConfigError`."""
+    from .effects import resolve_effects as resolve
     from .params import ConfigError
 
-    out = []
-    for e in effects or ():
-        if not isinstance(e, str):
-            out.append(e)
-            continue
-        getter = None
-        try:
-            from . import effects as library  # noqa: PLC0415
-
-            getter = getattr(library, "get_effect", None)
-        except ImportError:
-            pass
-        if getter is not None:
-            out.append(getter(e))
-            continue
-        hint = (f"'{e}' is a MODEL.md §8 candidate but is not implemented yet" if e in EFFECT_CANDIDATES
-                else f"MODEL.md §8 candidates: {', '.join(EFFECT_CANDIDATES)}")
-        raise ConfigError(f"unknown effect id {e!r}: no effects are available yet ({hint})")
-    return tuple(out)
+    try:
+        return resolve(effects)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def is_thesis_test(source) -> bool:
@@ -204,7 +184,7 @@ def replay(
         out_dir: output folder (created); ``log.csv``, ``meta.json``, ``replay.png``, ``metrics.json``.
         terrain: terrain id overriding the log's ``meta.json`` / the test's terrain.
         internal_resistance: ``"constant"`` or ``"viscous"`` (default: the test's; ``constant`` for logs).
-        effects: MODEL.md §8 effect ids or effect modules (none are implemented yet: ids raise).
+        effects: MODEL.md §8 effect ids (``trackenv.effects.EFFECT_IDS``, default parameters) or effect modules.
         substep: integration substep [s] (default ``trackenv.simulate.DEFAULT_SUBSTEP``, 1 ms).
         dt: largest output step [s] of the simulation (default 0.05 s); see the module docstring.
         figure: write ``replay.png`` (the slowest output; ``False`` skips it).

@@ -1,5 +1,79 @@
-"""Unmodelled effects (MODEL.md §8) that extend the base model through :class:`Effect`."""
+"""Unmodelled effects (MODEL.md §8) that extend the base model through :class:`Effect`.
+
+``EFFECTS`` maps each canonical id to its class; ``get_effect(id, **params)`` builds one with its
+calibrated defaults, overriding parameters by keyword (checked against the class's ``bounds``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
 
 from .base import Effect, effect_ids
+from .grouser_stiction import GrouserStiction
+from .internal_resistance import InternalResistance
+from .lateral_friction_radius import LateralFrictionRadius
+from .pitch_load_transfer import PitchLoadTransfer
+from .sensor_artifacts import SensorArtifacts
+from .slip_sinkage import SlipSinkage
 
-__all__ = ["Effect", "effect_ids"]
+EFFECTS: dict[str, type[Effect]] = {
+    cls.id: cls
+    for cls in (SlipSinkage, LateralFrictionRadius, InternalResistance, GrouserStiction, PitchLoadTransfer,
+                SensorArtifacts)
+}
+EFFECT_IDS: tuple[str, ...] = tuple(EFFECTS)
+
+
+def get_effect(effect_id: str, dtype=jnp.float32, **params) -> Effect:
+    """The effect ``effect_id`` with default parameters, overridden by ``params`` (validated against ``bounds``)."""
+    if effect_id not in EFFECTS:
+        raise ValueError(f"unknown effect id {effect_id!r}; known ids: {', '.join(EFFECT_IDS)}")
+    cls = EFFECTS[effect_id]
+    effect = cls.default(dtype=dtype)
+    if not params:
+        return effect
+    fields = {f.name: getattr(effect, f.name) for f in dataclasses.fields(effect)}
+    for key, value in params.items():
+        if key not in fields:
+            raise ValueError(f"effect {effect_id!r} has no parameter {key!r}; parameters: {', '.join(fields)}")
+        if key in cls.bounds:
+            lo, hi = cls.bounds[key]
+            try:
+                v = float(value)
+            except TypeError:  # arrays (batches) are checked elementwise
+                import numpy as np
+
+                v_arr = np.asarray(value, dtype=float)
+                if not (np.all(v_arr >= lo) and np.all(v_arr <= hi)):
+                    raise ValueError(f"effect {effect_id!r}: parameter {key!r} out of bounds [{lo}, {hi}]") from None
+            else:
+                if not (lo <= v <= hi):
+                    raise ValueError(f"effect {effect_id!r}: parameter {key!r} = {v} out of bounds [{lo}, {hi}]")
+            fields[key] = jnp.asarray(value, dtype)
+        else:
+            fields[key] = value  # static choices (e.g. sensor_artifacts.rectify)
+    return cls(**fields)
+
+
+__all__ = ["resolve_effects", "Effect", "effect_ids", "EFFECTS", "EFFECT_IDS", "get_effect", "SlipSinkage", "LateralFrictionRadius",
+           "InternalResistance", "GrouserStiction", "PitchLoadTransfer", "SensorArtifacts"]
+
+
+def resolve_effects(effects) -> tuple:
+    """Effect ids (MODEL.md §8) or :class:`Effect` modules -> a tuple of modules for ``load_params``.
+
+    Ids get their default parameters (:func:`get_effect`); an unknown id raises ``ValueError``
+    listing the known ones; anything that is neither raises ``TypeError``.
+    """
+    out = []
+    for e in tuple(effects or ()):
+        if isinstance(e, str):
+            out.append(get_effect(e))
+        elif isinstance(e, Effect):
+            out.append(e)
+        else:
+            raise TypeError(f"effects must be MODEL.md §8 ids or Effect modules, got {e!r}")
+    effect_ids(out)
+    return tuple(out)

@@ -44,6 +44,7 @@ import numpy as np
 from ..integrate import current_coeffs, etdrk4_substep, is_finite
 from ..params import Params, load_params
 from ..physics.model import State, initial_state
+from ..effects import resolve_effects
 from ..simulate import n_substeps
 
 # Environments default to a 1 ms substep, twice simulate's verified 0.5 ms: against the adaptive
@@ -65,9 +66,6 @@ COMMON_OBS = [
     ("prev_voltage_right", None, None),
     ("time_fraction", 0.0, 1.0),
 ]
-
-EFFECT_IDS = ("slip_sinkage", "lateral_friction_radius", "internal_resistance", "grouser_stiction",
-              "pitch_load_transfer", "sensor_artifacts")  # MODEL.md §8
 
 INFO_KEYS = ("success", "off_course", "diverged", "timeout", "time", "completion", "tracking_rmse", "energy",
              "episode_return")
@@ -137,31 +135,6 @@ class StepResult(NamedTuple):
 
 # ----------------------------------------------------------------------------------------------
 # construction
-
-
-def resolve_effects(effects) -> tuple:
-    """Effect modules from ids (MODEL.md §8) or modules; ids need ``trackenv.effects.get_effect``."""
-    out = []
-    for e in tuple(effects or ()):
-        if isinstance(e, str):
-            if e not in EFFECT_IDS:
-                raise ValueError(f"unknown effect id {e!r}; MODEL.md §8 ids: {', '.join(EFFECT_IDS)}")
-            try:
-                from .. import effects as fx  # noqa: PLC0415
-
-                getter = getattr(fx, "get_effect", None) or getattr(fx, "make_effect", None)
-            except ImportError:
-                getter = None
-            if getter is None:
-                raise NotImplementedError(
-                    f"effect {e!r} is not available: trackenv.effects provides no get_effect(id) yet; "
-                    "pass an effect module instance instead")
-            out.append(getter(e))
-        elif hasattr(e, "id"):
-            out.append(e)
-        else:
-            raise TypeError(f"effects must be MODEL.md §8 ids or effect modules, got {e!r}")
-    return tuple(out)
 
 
 def make_params(

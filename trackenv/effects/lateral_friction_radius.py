@@ -1,0 +1,63 @@
+"""``lateral_friction_radius``: lateral resistance from a turning-radius-dependent coefficient (MODEL.md §8).
+
+Thesis §3.4.4 (3.24) and §6.1.2: F_Lat,i = μ_t(ρ) F_n,i, the lateral coefficient falling with the turning
+radius (Kar 1987, "Prediction of track forces in skid-steering of military tracked vehicles",
+J. Terramechanics 24; Wong & Chiang 2001, "A general theory for skid steering of tracked vehicles on
+firm ground", Proc. IMechE D 215, who fit μ_t = μ_max / (0.925 + 0.15 R), R in m).
+
+Force law (replaces the shear-law lateral forces)::
+
+    R = |u| / max(|r|, r_eps)                    turning radius of the CG [m]
+    μ_t(R) = μ_max / (a + b R)
+    F_lat,i = −μ_t(R) F_n,i smoothsign(v_y,i; v_s)      [N]
+
+Defaults: a = 0.925, b = 0.15 1/m (Wong & Chiang), μ_max = 0.53 = tan 28° (dry sand's friction angle
+as the friction coefficient; PackBot's tracks are short, so R stays small in its turns), v_s = 0.05 m/s,
+r_eps = 1e-3 rad/s (R ≤ |u|/r_eps; a straight run has R → large and μ_t → 0).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+
+from ..physics.terramechanics import smoothsign
+from .base import Effect
+
+
+class LateralFrictionRadius(Effect):
+    """Lateral forces μ_t(R) F_n opposing v_y with μ_t(R) = μ_max / (a + b R)."""
+
+    id: ClassVar[str] = "lateral_friction_radius"
+    bounds: ClassVar[dict] = {
+        "mu_max": (0.0, 2.0),
+        "a": (0.1, 10.0),
+        "b": (0.0, 10.0),
+        "lateral_smoothing": (1e-4, 1.0),
+        "yaw_eps": (1e-6, 1.0),
+    }
+
+    mu_max: jax.Array  # -, μ_max
+    a: jax.Array  # -, constant of the denominator
+    b: jax.Array  # 1/m, radius coefficient
+    lateral_smoothing: jax.Array  # m/s, v_s
+    yaw_eps: jax.Array  # rad/s, r_eps
+
+    @classmethod
+    def default(cls, dtype=jnp.float32):
+        f = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+        return cls(mu_max=f(0.53), a=f(0.925), b=f(0.15), lateral_smoothing=f(0.05), yaw_eps=f(1e-3))
+
+    def turning_radius(self, u, r):
+        return jnp.abs(u) / jnp.maximum(jnp.abs(r), self.yaw_eps)
+
+    def coefficient(self, radius):
+        return self.mu_max / (self.a + self.b * radius)
+
+    def forces(self, ctx, forces, tau_int):
+        u, r = ctx.state.vel[0], ctx.state.vel[2]
+        mu = self.coefficient(self.turning_radius(u, r))  # (*b)
+        lateral = -mu * forces.normal * smoothsign(ctx.kin.lateral_velocity, self.lateral_smoothing)
+        return forces._replace(lateral=lateral), tau_int
