@@ -138,7 +138,7 @@ def main(argv=None):
     print(
         f"\nWhat bounds the step: a single vehicle does ~{single[4]:,.0f} FLOP per substep in "
         f"{single[3] / n_sub_total * 1e6:.1f} us, i.e. {gf:.2f} GFLOP/s ({100 * gf / peak:.2f}% of peak): it is bound by "
-        "per-kernel dispatch inside XLA's loop (about 160 small fused kernels per substep on (2, 14) arrays), "
+        "per-kernel dispatch inside XLA's loop (about 56 small fused kernels per substep on (2, 14) arrays), "
         "not by arithmetic or memory. Batching amortises that overhead until the per-substep working set "
         "leaves the caches."
     )

@@ -6,6 +6,7 @@
     trackenv replay logs/go_stop_01 --out out/replay       # a field-log folder (MODEL.md §9) vs the model
     trackenv replay go_stop_dry_sand --out out/r           # a thesis test (reconstructed voltages)
     trackenv replay --list                                 # the thesis test ids
+    trackenv field-twin --out data/field/thesis --seed 0   # SYNTHETIC field twin (known effects + noise)
 """
 
 from __future__ import annotations
@@ -193,6 +194,17 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def cmd_field_twin(args) -> int:
+    from trackenv.fieldtwin import make_field_twin
+
+    t0 = time.perf_counter()
+    folders = make_field_twin(args.out, seed=args.seed, sample_rate=args.rate, tests=args.tests or None)
+    size = sum(f.stat().st_size for d in folders for f in d.iterdir() if f.is_file())
+    print(f"wrote the SYNTHETIC field twin ({len(folders)} tests, {size / 1e6:.2f} MB) to {args.out} "
+          f"in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from trackenv.simulate import DEFAULT_SUBSTEP
 
@@ -228,6 +240,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--dt", type=float, default=0.05,
                    help="largest simulation output step [s] (default 0.05; finer for faster logs)")
     r.set_defaults(func=cmd_replay)
+    f = sub.add_parser("field-twin", help="write the SYNTHETIC field twin of the thesis tests (known effects + noise)")
+    f.add_argument("--out", default="data/field/thesis", help="output folder (default data/field/thesis)")
+    f.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    f.add_argument("--rate", type=float, default=50.0, help="sample rate [Hz] (default 50)")
+    f.add_argument("--tests", nargs="+", metavar="ID", help="test ids (default: all)")
+    f.set_defaults(func=cmd_field_twin)
     return p
 
 

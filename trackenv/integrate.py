@@ -118,9 +118,10 @@ def diagonal_damping(params, state: State, ev):
         lambda a, b: contact.forces_from_saturated(params.terrain, kin.area, ev.forces.normal, a, b),
         (jz_sat, jx_sat), (jnp.ones_like(jz_sat), jnp.ones_like(jx_sat)),
     )
-    _, ds_z = jax.jvp(lambda s: contact.saturations(kin._replace(slip=s))[0], (kin.slip,), (jnp.ones_like(kin.slip),))
-    _, ds_x = jax.jvp(lambda v: contact.saturations(kin._replace(lateral_velocity=v))[1],
-                      (kin.lateral_velocity,), (jnp.ones_like(kin.lateral_velocity),))
+    # S_z depends on the slip only and S_x on v_y only: one JVP gives both slopes.
+    _, (ds_z, ds_x) = jax.jvp(lambda s, v: contact.saturations(kin._replace(slip=s, lateral_velocity=v)),
+                              (kin.slip, kin.lateral_velocity),
+                              (jnp.ones_like(kin.slip), jnp.ones_like(kin.lateral_velocity)))
     dfl_ds = dfl_dj * state.jz * ds_z  # dF/ds = dF/dj' * j_z * dS/ds (chain rule through 3.17)
     dflat_dvy = dflat_dj * state.jx * ds_x
     _, dtau_dw = jax.jvp(lambda w: friction_torque(veh, w) + internal_resistance_torque(params.internal, w),
