@@ -186,16 +186,30 @@ def advance(state: State, volts, params, h, unroll: int = 1) -> State:
     return state
 
 
-def advance_constant(state: State, voltage, params, dt, substeps: int, unroll: int = 1) -> State:
-    """Advance ``state`` by one control step ``dt`` with the voltage (2, *b) held constant."""
+def advance_constant(state: State, voltage, params, dt, substeps: int, unroll: int = 1,
+                     integrand=None, integrand_start=None):
+    """Advance ``state`` by one control step ``dt`` with the voltage (2, *b) held constant.
+
+    If ``integrand`` (a function of the state, e.g. the supply power) is given, also return its
+    trapezoid-rule integral over the substeps, starting from ``integrand_start`` (default: its value at
+    ``state``): ``(state, integral)``.
+    """
     h = dt / substeps
     cur = current_coeffs(params, h)
     v3 = jnp.broadcast_to(voltage[None], (3,) + voltage.shape)
+    if integrand is None:
+        return jax.lax.fori_loop(0, substeps, lambda _, s: etdrk4_substep(s, v3, params, h, cur), state,
+                                 unroll=unroll)
 
-    def body(_, s):
-        return etdrk4_substep(s, v3, params, h, cur)
+    def body(_, carry):
+        s, f_prev, total = carry
+        s = etdrk4_substep(s, v3, params, h, cur)
+        f = integrand(s)
+        return s, f, total + 0.5 * h * (f_prev + f)
 
-    return jax.lax.fori_loop(0, substeps, body, state, unroll=unroll)
+    f0 = integrand(state) if integrand_start is None else integrand_start
+    out, _, total = jax.lax.fori_loop(0, substeps, body, (state, f0, jnp.zeros_like(f0)), unroll=unroll)
+    return out, total
 
 
 def is_finite(state: State, nb: int):

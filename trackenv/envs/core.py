@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..integrate import current_coeffs, etdrk4_substep, is_finite
+from ..integrate import advance_constant, is_finite
 from ..params import Params, load_params
 from ..physics.model import State, initial_state
 from ..effects import resolve_effects
@@ -207,25 +207,15 @@ def supply_power(volts, current):
 def advance_with_energy(physics: State, volts, sim: Params, dt: float, substeps: int):
     """``trackenv.integrate.advance_constant`` plus the electrical energy drawn during the step [J].
 
-    Same substeps (``etdrk4_substep``) as ``advance_constant``; the supply power is integrated by the
+    ``advance_constant`` with its trapezoid quadrature of the supply power; it is integrated by the
     trapezoid rule over the substeps. At the start of the step the current is taken as the
     quasi-steady (V - alpha_v omega)/R_m that the motor reaches within ~1 ms (L_m/R_m = 0.25 ms) after
     the voltage changes, so a voltage step's in-rush is counted. Works for any trailing batch shape.
     """
-    h = dt / substeps
-    cur = current_coeffs(sim, h)
-    v3 = jnp.broadcast_to(volts[None], (3,) + volts.shape)
     veh = sim.vehicle
     p0 = supply_power(volts, (volts - veh.alpha_v * physics.omega) / veh.motor_resistance)
-
-    def body(_, carry):
-        s, p_prev, e = carry
-        s = etdrk4_substep(s, v3, sim, h, cur)
-        p = supply_power(volts, s.current)
-        return s, p, e + 0.5 * h * (p_prev + p)
-
-    out, _, energy = jax.lax.fori_loop(0, substeps, body, (physics, p0, jnp.zeros_like(p0)))
-    return out, energy
+    return advance_constant(physics, volts, sim, dt, substeps,
+                            integrand=lambda s: supply_power(volts, s.current), integrand_start=p0)
 
 
 def _native_rule(dt, substeps, axis_size, in_batched, physics, volts, sim):
