@@ -38,7 +38,8 @@ def _simulate_test(test_id: str, terrain: str | None, internal: str | None, subs
 def _summary(prof, traj) -> dict:
     import numpy as np
 
-    t = np.asarray(traj.t)
+    from trackenv.replay import anchor_metrics
+
     ch = {k: np.asarray(v) for k, v in traj.channels.items()}
     out = {
         "test": prof.id, "terrain": prof.terrain, "maneuver": prof.maneuver,
@@ -49,18 +50,11 @@ def _summary(prof, traj) -> dict:
         "final_heading_deg": float(np.degrees(ch["heading"][-1])),
         "anchors": [],
     }
-    for a in prof.anchors:
-        if a.get("stat") != "mean" or a.get("t0") is None:
-            continue
-        m = (t >= a["t0"]) & (t <= a["t1"])
-        if a["signal"] == "current":
-            sim = float(np.mean(0.5 * (np.abs(ch["i_left"][m]) + np.abs(ch["i_right"][m]))))
-        elif a["signal"] in ch:
-            sim = float(np.mean(ch[a["signal"]][m]))
-        else:
-            continue
-        out["anchors"].append({"signal": a["signal"], "window_s": [a["t0"], a["t1"]], "thesis_field": a["value"],
-                               "simulated": sim, "rel_diff": (sim - a["value"]) / a["value"]})
+    for a in anchor_metrics(prof, traj, 0.05):
+        if a["simulated"] is not None:
+            out["anchors"].append({"signal": a["signal"], "window_s": [a["t0"], a["t1"]],
+                                   "thesis_field": a["thesis_field"], "simulated": a["simulated"],
+                                   "rel_diff": a["rel_diff"]})
     return out
 
 

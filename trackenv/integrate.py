@@ -24,7 +24,8 @@ import jax
 import jax.numpy as jnp
 
 from .physics.model import State, decay_rates, evaluate
-from .physics.motor import current_decay_rate
+from .physics import contact
+from .physics.motor import current_decay_rate, friction_torque, internal_resistance_torque
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series
 _TAYLOR_TERMS = 12
@@ -108,20 +109,16 @@ def diagonal_damping(params, state: State, ev):
     integrated exponentially and the rest, f + lambda (x - x0), by RK4: an exact reformulation.
 
     """
-    from .physics import contact
-    from .physics.motor import friction_torque, internal_resistance_torque
-
     veh, kin = params.vehicle, ev.kin
-    sat_z, sat_x = contact.saturations(kin)
+    # S_z depends on the slip only and S_x on v_y only: one JVP gives both factors and both slopes.
+    (sat_z, sat_x), (ds_z, ds_x) = jax.jvp(lambda s, v: contact.saturations(kin._replace(slip=s, lateral_velocity=v)),
+                                           (kin.slip, kin.lateral_velocity),
+                                           (jnp.ones_like(kin.slip), jnp.ones_like(kin.lateral_velocity)))
     jz_sat, jx_sat = state.jz * sat_z, state.jx * sat_x
     _, (dfl_dj, dflat_dj) = jax.jvp(
         lambda a, b: contact.forces_from_saturated(params.terrain, kin.area, ev.forces.normal, a, b),
         (jz_sat, jx_sat), (jnp.ones_like(jz_sat), jnp.ones_like(jx_sat)),
     )
-    # S_z depends on the slip only and S_x on v_y only: one JVP gives both slopes.
-    _, (ds_z, ds_x) = jax.jvp(lambda s, v: contact.saturations(kin._replace(slip=s, lateral_velocity=v)),
-                              (kin.slip, kin.lateral_velocity),
-                              (jnp.ones_like(kin.slip), jnp.ones_like(kin.lateral_velocity)))
     dfl_ds = dfl_dj * state.jz * ds_z  # dF/ds = dF/dj' * j_z * dS/ds (chain rule through 3.17)
     dflat_dvy = dflat_dj * state.jx * ds_x
     _, dtau_dw = jax.jvp(lambda w: friction_torque(veh, w) + internal_resistance_torque(params.internal, w),

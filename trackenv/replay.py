@@ -310,7 +310,8 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
                         params=params)
 
 
-def _anchor_metrics(prof, traj, dt: float) -> list[dict]:
+def anchor_metrics(prof, traj, dt: float) -> list[dict]:
+    """A thesis test's text anchors (configs/field) beside the simulated values, for trajectories sampled every ``dt``."""
     t = np.arange(np.asarray(traj.t).shape[0]) * dt
     ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
     rows = []
@@ -375,7 +376,7 @@ def _replay_thesis(test_id, out, terrain, internal, effect_modules, effect_names
         "source": test_id, "kind": "thesis_test", "reconstructed": True, "note": RECONSTRUCTED_NOTE,
         "terrain": terrain_id, "maneuver": prof.maneuver, "internal_resistance": ir, "effects": effect_names,
         "duration_s": n * dt, "dt_s": dt, "substep_s": substep, "wall_time_s": wall,
-        "channels": {}, "anchors": _anchor_metrics(prof, traj, dt),
+        "channels": {}, "anchors": anchor_metrics(prof, traj, dt),
     }
     met = _json_dump(out / "metrics.json", metrics)
     cols = {c: written.data[c].to_numpy(np.float64) for c in written.data.columns}

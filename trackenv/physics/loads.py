@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .geometry import contact_area, track_y
+from .geometry import contact_area, contact_x, track_y
 
 GRAVITY = 9.81  # m/s^2
 
@@ -24,7 +24,5 @@ def normal_loads(vehicle, u, r, nb: int, pitch_gradient=None):
     p_y = -2.0 * vehicle.mass * lateral_accel * vehicle.cg_height / (b * length * gauge**2)
     pressure = (p0 + p_y * y)[:, None]  # (2, 1, *b)
     if pitch_gradient is not None:
-        from .geometry import contact_x
-
         pressure = pressure + pitch_gradient * contact_x(vehicle, nb)
     return jnp.maximum(area * pressure, 0.0)
