@@ -60,3 +60,13 @@ def test_grad_finite():
 
     g = jax.grad(final_speed)(jnp.asarray(0.04))
     assert np.isfinite(g) and g < 0
+
+
+def test_quadratic_term_torque():
+    """tau = b0 smoothsign + b1 w + b2 w|w| (the quadratic member of the family)."""
+    import jax.numpy as jnp
+
+    e = get_effect("internal_resistance", b0=0.3, b1=0.01, b2=0.002)
+    w = jnp.array([-20.0, 20.0])
+    tau = np.asarray(e.torque(w))
+    np.testing.assert_allclose(tau, [-(0.3 + 0.2 + 0.8), 0.3 + 0.2 + 0.8], rtol=1e-5)

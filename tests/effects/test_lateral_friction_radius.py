@@ -43,3 +43,9 @@ def test_zrt_end_to_end():
     # with mu_max = 0 nothing resists yaw laterally: it turns faster than the shear-law base
     tr0 = sim("dry_sand", (get_effect("lateral_friction_radius", mu_max=0.0),), t_end=3.0)
     assert float(tr0.channels["yaw_rate"][-1]) < yb
+
+
+def test_mu_min_floor():
+    """mu_t(R) = mu_min + mu_max/(a + bR) levels off at mu_min in wide turns."""
+    e = get_effect("lateral_friction_radius", mu_max=0.6, a=1.0, b=1.0, mu_min=0.2)
+    np.testing.assert_allclose(np.asarray(e.coefficient(np.array([0.0, 1.0, 1e6]))), [0.8, 0.5, 0.2], rtol=1e-5)

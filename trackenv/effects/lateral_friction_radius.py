@@ -8,8 +8,12 @@ firm ground", Proc. IMechE D 215, who fit μ_t = μ_max / (0.925 + 0.15 R), R in
 Force law (replaces the shear-law lateral forces)::
 
     R = |u| / max(|r|, r_eps)                    turning radius of the CG [m]
-    μ_t(R) = μ_max / (a + b R)
+    μ_t(R) = μ_min + μ_max / (a + b R)
     F_lat,i = −μ_t(R) F_n,i smoothsign(v_y,i; v_s)      [N]
+
+μ_min (default 0) is a floor of the coefficient at large radii (the residual lateral friction of a
+track sliding sideways in a wide turn; Kitano & Jyozaki's and Steeds's fits of μ_t(R) level off
+rather than vanish).
 
 Defaults: a = 0.925, b = 0.15 1/m (Wong & Chiang), μ_max = 0.53 = tan 28° (dry sand's friction angle
 as the friction coefficient; PackBot's tracks are short, so R stays small in its turns), v_s = 0.05 m/s,
@@ -33,6 +37,7 @@ class LateralFrictionRadius(Effect):
     id: ClassVar[str] = "lateral_friction_radius"
     bounds: ClassVar[dict] = {
         "mu_max": (0.0, 2.0),
+        "mu_min": (0.0, 2.0),
         "a": (0.1, 10.0),
         "b": (0.0, 10.0),
         "lateral_smoothing": (1e-4, 1.0),
@@ -44,17 +49,18 @@ class LateralFrictionRadius(Effect):
     b: jax.Array  # 1/m, radius coefficient
     lateral_smoothing: jax.Array  # m/s, v_s
     yaw_eps: jax.Array  # rad/s, r_eps
+    mu_min: jax.Array | float = 0.0  # -, floor of μ_t at large radius
 
     @classmethod
     def default(cls, dtype=jnp.float32):
         f = lambda v: jnp.asarray(v, dtype)  # noqa: E731
-        return cls(mu_max=f(0.53), a=f(0.925), b=f(0.15), lateral_smoothing=f(0.05), yaw_eps=f(1e-3))
+        return cls(mu_max=f(0.53), a=f(0.925), b=f(0.15), lateral_smoothing=f(0.05), yaw_eps=f(1e-3), mu_min=f(0.0))
 
     def turning_radius(self, u, r):
         return jnp.abs(u) / jnp.maximum(jnp.abs(r), self.yaw_eps)
 
     def coefficient(self, radius):
-        return self.mu_max / (self.a + self.b * radius)
+        return self.mu_min + self.mu_max / (self.a + self.b * radius)
 
     def forces(self, ctx, forces, tau_int):
         u, r = ctx.state.vel[0], ctx.state.vel[2]

@@ -50,9 +50,15 @@ def _integral_at(tau, t, s, F):
 
 
 def moving_average(t, s, window):
-    """Causal moving average of ``s`` (T, *b) over ``window`` [s] (exact for piecewise-linear s)."""
+    """Causal moving average of ``s`` (T, *b) over ``window`` [s] (exact for piecewise-linear s).
+
+    ``window`` is a scalar or has the trailing batch shape of ``s`` (one window per vehicle).
+    """
     if t.shape[0] < 2:
         return s
+    window = jnp.asarray(window)
+    if window.ndim > 0:  # one window per vehicle on the last axis
+        return jax.vmap(lambda s_, w_: moving_average(t, s_, w_), in_axes=(-1, -1), out_axes=-1)(s, window)
     F = _cumulative_integral(t, s)
     w = jnp.maximum(window, 1e-9)
     avg = (F - _integral_at(t - w, t, s, F)) / w

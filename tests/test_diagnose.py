@@ -1,0 +1,189 @@
+"""Sim-to-real gap diagnosis (trackenv.diagnose): phases, noise, bad input, folds, and verdicts that
+could fail — an effect found where the SYNTHETIC field twin has one, ``none`` where the logs are the
+base model plus noise."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+import trackenv as te
+from trackenv.diagnose import DiagnosisError, candidate_set, diagnose
+from trackenv.diagnose.data import load_tests, noise_level
+from trackenv.diagnose.fit import make_folds
+from trackenv.diagnose.phases import phase_spans, segment_phases
+from trackenv.fieldlog import write_log_columns
+
+TWIN = te.__file__.rsplit("/", 2)[0] + "/data/field/thesis"
+
+
+def test_phases_from_voltages():
+    t = np.arange(0, 10.001, 0.02)
+    rows = [[0, 0, 0], [0.5, 0, 0], [0.8, 12, 12], [3, 12, 12], [3.2, 7, 17], [5, 7, 17], [5.3, 0, 0], [10, 0, 0]]
+    rows = np.array(rows, float)
+    volts = np.stack([np.interp(t, rows[:, 0], rows[:, 1]), np.interp(t, rows[:, 0], rows[:, 2])], 1)
+    spans = [p for p, a, b in phase_spans(t, segment_phases(t, volts))]
+    assert spans == ["idle", "ramp", "cruise", "ramp", "turn", "brake", "coast"]
+    # zero-radius spin (V_l = -V_r) is a turn
+    v = np.stack([np.full_like(t, -12.0), np.full_like(t, 12.0)], 1)
+    assert set(segment_phases(t, v)) == {"turn"}
+
+
+def test_noise_level_is_robust_to_the_signal():
+    rng = np.random.default_rng(0)
+    t = np.arange(0, 10, 0.02)
+    sig = np.clip(t, 0, 1) * 2.0 + 0.3 * np.sin(t)  # ramp + slow wave
+    est = noise_level(sig + rng.normal(0, 0.05, t.size))
+    assert est == pytest.approx(0.05, rel=0.15)
+
+
+def test_folds_are_grouped_by_test():
+    folds = make_folds(4)
+    assert [h for _, h in folds] == [(0,), (1,), (2,), (3,)]
+    for c, h in folds:
+        assert not set(c) & set(h) and set(c) | set(h) == {0, 1, 2, 3}
+    assert len(make_folds(9)) == 6 and make_folds(1) == []
+
+
+def test_candidate_anchors_reproduce_the_base_model():
+    """Every candidate contains the base model (so a fit can only improve on ``none`` in-sample)."""
+    from trackenv.diagnose.batch import BatchSimulator
+
+    tests, _ = load_tests(TWIN, ["go_stop_dry_sand", "j_turn_asphalt"])
+    sim = BatchSimulator(tests)
+    base, _ = sim.run(candidate_set()[-1], {})
+    for cand in candidate_set():
+        if cand.name in ("none", "lateral_friction_radius", "slip_sinkage", "grouser_stiction"):
+            continue  # these have no exactly neutral point (a different law, or tiny but non-zero values)
+        pred, div = sim.run(cand, cand.physical(cand.anchor_unit()[None]))
+        assert not div.any()
+        for j in range(len(tests)):
+            for sig in base[j]:
+                np.testing.assert_allclose(pred[j][sig][:, 0], base[j][sig][:, 0], rtol=5e-3, atol=5e-3, err_msg=cand.name)
+
+
+def _copy(names, dst):
+    for n in names:
+        shutil.copytree(f"{TWIN}/{n}", dst / n)
+    return dst
+
+
+def test_bad_input_is_excluded_or_refused(tmp_path):
+    _copy(["go_stop_dry_sand"], tmp_path)
+    short = {"t": np.arange(5) * 0.02, "v_left": np.zeros(5), "v_right": np.zeros(5), "i_left": np.zeros(5),
+             "i_right": np.zeros(5), "speed_ideal": np.zeros(5), "yaw_rate": np.zeros(5)}
+    write_log_columns(tmp_path / "too_short", short, {"terrain": "dry_sand", "maneuver": "x", "current_sensor": "signed"})
+    (tmp_path / "no_volts").mkdir()
+    (tmp_path / "no_volts" / "log.csv").write_text("t,i_left,i_right,speed_ideal,yaw_rate\n0,1,1,0,0\n")
+    (tmp_path / "no_volts" / "meta.json").write_text(json.dumps({"terrain": "dry_sand", "maneuver": "x",
+                                                                 "current_sensor": "signed"}))
+    tests, excluded = load_tests(tmp_path)
+    assert [t.name for t in tests] == ["go_stop_dry_sand"]
+    why = {e["test"]: e["reason"] for e in excluded}
+    assert "too_short" in why and "samples" in why["too_short"]
+    assert "no_volts" in why and "v_left" in why["no_volts"]
+    with pytest.raises(DiagnosisError, match="no usable field test"):
+        load_tests(tmp_path, ["too_short", "no_volts"])
+    with pytest.raises(DiagnosisError, match="no such folder"):
+        load_tests(tmp_path / "nope")
+    with pytest.raises(DiagnosisError, match="unknown candidate"):
+        diagnose(tmp_path, None, candidates=["magic"], progress=False)
+
+
+def test_nan_runs_are_noted_not_fatal(tmp_path):
+    _copy(["go_stop_dry_sand"], tmp_path)
+    p = tmp_path / "go_stop_dry_sand" / "log.csv"
+    lines = p.read_text().splitlines()
+    head = lines[0].split(",")
+    k = head.index("yaw_rate")
+    for i in range(20, 60):
+        cells = lines[i].split(",")
+        cells[k] = ""
+        lines[i] = ",".join(cells)
+    p.write_text("\n".join(lines) + "\n")
+    tests, _ = load_tests(tmp_path)
+    assert np.isnan(tests[0].measured["yaw_rate"]).sum() == 40
+    assert any("missing samples" in n for n in tests[0].notes)
+
+
+@pytest.fixture(scope="module")
+def viscous_go_stop(tmp_path_factory):
+    out = tmp_path_factory.mktemp("diag_visc")
+    d = diagnose(TWIN, out, tests=["go_stop_dry_sand", "go_stop_2ms_dry_sand"], internal_resistance="viscous",
+                 candidates=["internal_resistance", "recalibrate_base", "sensor_artifacts", "lateral_friction_radius"],
+                 progress=False)
+    return d, out
+
+
+def test_viscous_base_gap_is_internal_resistance_in_cruise_current(viscous_go_stop):
+    """Thesis §5.4.1: the viscous model over-predicts the 2 m/s current (~3.1 A vs 2.23 A)."""
+    d, out = viscous_go_stop
+    v = d.verdict
+    assert v["effect"] == "internal_resistance"
+    assert v["heldout_gap_shrink"] > 0.3
+    top = d.report["gap_cells"][0]
+    assert top["test"] == "go_stop_2ms_dry_sand" and top["phase"] == "cruise" and top["signal"] in ("i_left", "i_right")
+    assert top["bias_before"] > 0.5  # the viscous model draws too much current
+    rep = json.loads((out / "report.json").read_text())
+    assert {"effect", "confidence", "heldout_gap_shrink"} <= set(rep["verdict"])
+    assert {"effect", "heldout_nrmse", "params", "score"} <= set(rep["ranking"][0])
+    assert {"test", "signal", "phase", "nrmse_before", "nrmse_after"} <= set(rep["cells"][0])
+    assert 0.0 <= rep["verdict"]["confidence"] <= 1.0
+    assert "SYNTHETIC" in rep["data_label"] and "SYNTHETIC" in (out / "report.md").read_text()
+    for f in ("heatmap.png", "ranking.png", "overlay_go_stop_2ms_dry_sand.png"):
+        assert (out / f).stat().st_size > 10_000
+
+
+def _base_case(folder, seed=0):
+    """Two tests simulated with the base model + white noise: nothing unmodelled."""
+    rng = np.random.default_rng(seed)
+    specs = {"go": [[0, 0, 0], [0.3, 11.8, 11.8], [3, 11.8, 11.8], [3.1, 0, 0], [5, 0, 0]],
+             "turn": [[0, 0, 0], [0.3, 10, 10], [1.5, 10, 10], [1.7, 5, 15], [3.5, 5, 15], [3.7, 0, 0], [5, 0, 0]]}
+    params = te.load_params("dry_sand")
+    for name, rows in specs.items():
+        traj = te.simulate(params, te.VoltageProfile.from_breakpoints(rows), 5.0, dt=0.02)
+        ch = {k: np.asarray(v, float) for k, v in traj.channels.items()}
+        noise = {"i_left": 0.08, "i_right": 0.08, "speed_ideal": 0.008, "yaw_rate": 0.015}
+        cols = {"t": np.asarray(traj.t, float), "v_left": np.asarray(traj.voltage[:, 0], float),
+                "v_right": np.asarray(traj.voltage[:, 1], float)}
+        cols.update({k: ch[k] + rng.normal(0, s, ch[k].shape) for k, s in noise.items()})
+        write_log_columns(folder / name, cols, {"terrain": "dry_sand", "maneuver": name, "current_sensor": "signed",
+                                                "synthetic": True, "notes": "SYNTHETIC test case: base model + noise"})
+    return folder
+
+
+def test_base_model_plus_noise_gives_none(tmp_path):
+    d = diagnose(_base_case(tmp_path / "case"), None,
+                 candidates=["internal_resistance", "slip_sinkage", "lateral_friction_radius", "recalibrate_base"],
+                 progress=False)
+    assert d.verdict["effect"] == "none", d.verdict
+    assert d.report["gap_cells"] == [] or not d.verdict["gap_significant"]
+
+
+def test_cli_bad_folder_exits_2(tmp_path, capsys):
+    from trackenv.cli import main
+
+    assert main(["diagnose", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+
+
+# The withheld-effect check, small CI version. Threshold: at least 2 of these 3 blind cases (effects in forms
+# the candidate library does not have; labels withheld) get the right verdict. The full benchmark
+# (trackenv diagnose-benchmark --cases 21) is in the README.
+CI_LABELS = ["internal_resistance", "slip_sinkage", "none"]
+
+
+def test_blind_benchmark_small(tmp_path):
+    from trackenv.diagnose.benchmark import run_benchmark
+
+    res = run_benchmark(tmp_path, len(CI_LABELS), seed=3, labels=CI_LABELS, n_tests=3, progress=False)
+    s = res["summary"]
+    assert sum(r["verdict"] == r["label"] for r in res["cases"]) >= 2, res["cases"]
+    assert s["null_false_positive_rate"] == 0.0
+    assert (tmp_path / "benchmark.md").exists() and (tmp_path / "confusion.png").exists()
+    # the label never reaches the case folders
+    for f in (tmp_path / "cases").rglob("*.json"):
+        assert "internal_resistance" not in f.read_text() and "slip_sinkage" not in f.read_text()

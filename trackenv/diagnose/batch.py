@@ -1,0 +1,232 @@
+"""Batched simulation of many (test, parameter set) pairs in one jitted call per candidate.
+
+All the pairs of a candidate run as one batch with the vehicle index on the last axis (MODEL.md §6):
+vehicle ``j * S + s`` is test ``j`` with parameter set ``s``. Tests of similar length share a batch
+(``buckets``: padded to the longest; a test much shorter than the longest goes to its own bucket so
+that padding wastes at most half the work). Each test's voltages are resampled onto the batch's
+common grid (step ≤ 10 ms and ≤ the log's smallest interval, so the log's own breakpoints are kept for
+logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample times by linear
+interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
+and the pose is moved into the log's frame by its first pose sample — as :func:`trackenv.replay.replay`
+does for one test. Compiled programs are cached per (candidate, bucket shape), so every round of a
+fit reuses them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..params import load_params
+from ..physics.model import initial_state
+from ..simulate import VoltageProfile, _simulate_jit
+from .candidates import Candidate
+from .data import TestData
+
+FIT_SUBSTEP = 0.001  # s: NRMSE ≤ 1.4 % against the tight reference (tests/test_convergence.py)
+
+
+@dataclass(frozen=True)
+class Bucket:
+    tests: tuple  # indices into the test list
+    n_steps: int
+    dt: float
+    substeps: int
+    grid_t: np.ndarray  # voltage grid [s]
+    volts: np.ndarray  # (G, 2, n_tests_in_bucket)
+
+
+def _grid_dt(tests: list[TestData], substep: float) -> float:
+    """Output step: ≤ 20 ms and ≤ the smallest log interval, a multiple of the substep (≥ 5 ms)."""
+    min_int = min(float(np.min(np.diff(t.t))) for t in tests)
+    target = max(min(0.02, min_int), 0.005)
+    k = max(1, int(math.floor(target / substep + 1e-6)))
+    return k * substep
+
+
+def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP) -> list[Bucket]:
+    dt = _grid_dt(tests, substep)
+    substeps = max(1, int(round(dt / substep)))
+    order = sorted(range(len(tests)), key=lambda j: -tests[j].duration)
+    groups: list[list[int]] = []
+    for j in order:
+        if groups and tests[j].duration >= 0.5 * tests[groups[-1][0]].duration:
+            groups[-1].append(j)
+        else:
+            groups.append([j])
+    buckets = []
+    for g in groups:
+        g = sorted(g)
+        t_end = max(tests[j].duration for j in g)
+        n_steps = int(math.ceil(t_end / dt - 1e-9)) + 1
+        hv = min(0.01, min(float(np.min(np.diff(tests[j].t))) for j in g))
+        grid = np.arange(int(math.ceil(n_steps * dt / hv)) + 2) * hv
+        volts = np.stack([np.stack([np.interp(grid, tests[j].t, tests[j].volts[:, c]) for c in range(2)], 0)
+                          for j in g], -1)  # (2, G, nb) -> transpose
+        volts = np.transpose(volts, (1, 0, 2))
+        buckets.append(Bucket(tuple(g), n_steps, dt, substeps, grid, volts))
+    return buckets
+
+
+def encoder_average(t: np.ndarray, x: np.ndarray, window: float) -> np.ndarray:
+    """Causal moving average of ``x`` (T, S) over ``window`` [s] on the uniform grid ``t`` (held before t0).
+
+    The encoder-averaging part of ``sensor_artifacts`` (its ``moving_average``), in numpy for the
+    diagnosis's per-candidate encoder layer.
+    """
+    if window <= 0:
+        return x
+    dt = t[1] - t[0]
+    F = np.concatenate([np.zeros_like(x[:1]), np.cumsum(0.5 * (x[1:] + x[:-1]) * dt, axis=0)])
+    tau = t - window
+    k = np.clip(np.floor(tau / dt).astype(int), 0, len(t) - 2)
+    f = np.clip((tau - t[k]) / dt, 0.0, 1.0)[:, None]
+    Fi = F[k] * (1 - f) + F[k + 1] * f
+    Fi = np.where((tau < 0)[:, None], x[:1] * tau[:, None], Fi)
+    return (F - Fi) / window
+
+
+@jax.jit
+def _instruments_jit(effect, channels, t, params):
+    return effect.instruments(channels, t, params)
+
+
+def _stack(trees):
+    return jax.tree.map(lambda *xs: jnp.stack(xs, -1) if eqx.is_inexact_array(xs[0]) else xs[0], *trees)
+
+
+class BatchSimulator:
+    """Simulates candidates' parameter sets on every test; returns predictions at the logs' sample times."""
+
+    def __init__(self, tests: list[TestData], internal_resistance: str = "constant", substep: float = FIT_SUBSTEP):
+        self.tests = tests
+        self.substep = substep
+        self.internal_resistance = internal_resistance
+        self.buckets = make_buckets(tests, substep)
+        self.base = [load_params(t.terrain, vehicle=t.vehicle, internal_resistance=internal_resistance) for t in tests]
+        self.b_int_constant = np.array(
+            [float(load_params(t.terrain, vehicle=t.vehicle, internal_resistance="constant").internal.constant)
+             for t in tests])
+        self.n_vehicle_seconds = 0.0
+        self._base_channels = {}  # bucket index -> raw base-model channels on the output grid (T, nb)
+        # interpolation of the output grid at each log's times
+        self._interp = {}
+        for b in self.buckets:
+            for j in b.tests:
+                x = self.tests[j].t / b.dt
+                i0 = np.clip(np.floor(x).astype(int), 0, b.n_steps - 1)
+                self._interp[j] = (i0, (x - i0)[:, None])
+
+    def run(self, cand: Candidate, values: dict, progress=None, windows: tuple = ()) -> tuple[list[dict], np.ndarray]:
+        """Simulate ``values`` ({name: (S,)} physical parameter sets) on every test.
+
+        Returns ``(pred, diverged)``: ``pred[j][signal]`` is (K_j, S) at test j's sample times;
+        ``diverged`` (n_tests, S) bool. With ``windows`` (encoder averaging windows [s], see
+        :func:`encoder_average`), each parameter set comes in ``len(windows)`` variants: column
+        ``s * len(windows) + w`` is set ``s`` with ``speed_ideal`` averaged over ``windows[w]``.
+        """
+        pred, div = self._run(cand, values, progress)
+        if not windows:
+            return pred, div
+        nw = len(windows)
+        out = []
+        for j, p in enumerate(pred):
+            q = {k: np.repeat(v, nw, axis=1) for k, v in p.items()}
+            if "speed_ideal" in p:
+                sp = self._speed_grid[j]  # (T, S) on the output grid
+                g = self._grid_of[j]
+                i0, w = self._interp[j]
+                for k, win in enumerate(windows):
+                    avg = encoder_average(g, sp, win)
+                    q["speed_ideal"][:, k::nw] = avg[i0] * (1.0 - w) + avg[i0 + 1] * w
+            out.append(q)
+        return out, np.repeat(div, nw, axis=1)
+
+    def _run(self, cand: Candidate, values: dict, progress=None) -> tuple[list[dict], np.ndarray]:
+        S = len(next(iter(values.values()))) if values else 1
+        self._speed_grid, self._grid_of = {}, {}
+        pred: list[dict] = [None] * len(self.tests)
+        diverged = np.zeros((len(self.tests), S), bool)
+        for bi, b in enumerate(self.buckets):
+            nb = len(b.tests)
+            if cand.instrument_only:
+                ch = self._instrument_only(bi, b, cand, values, S)
+                for q, j in enumerate(b.tests):
+                    pred[j] = self._at_log(j, {k: v[:, q * S:(q + 1) * S] for k, v in ch.items()})
+                continue
+            base = _stack([self.base[j] for j in b.tests])  # leaves (nb,)
+            base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
+            vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
+            ref = {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)}
+            params = cand.apply(base, vals, ref)
+            volts = np.repeat(b.volts, S, axis=-1)
+            prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
+            state0 = initial_state(params, (nb * S,))
+            traj = _simulate_jit(params, prof, state0, n_steps=b.n_steps, dt=float(b.dt), substeps=b.substeps)
+            ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
+            div = np.asarray(traj.diverged)
+            if cand.name == "none" and S == 1:
+                self._base_channels[bi] = (ch, div)
+            self.n_vehicle_seconds += nb * S * b.n_steps * b.dt
+            for q, j in enumerate(b.tests):
+                cols = slice(q * S, (q + 1) * S)
+                pred[j] = self._at_log(j, {k: v[:, cols] for k, v in ch.items()})
+                self._speed_grid[j] = ch["speed_ideal"][:, cols]
+                self._grid_of[j] = np.arange(b.n_steps + 1) * b.dt
+                diverged[j] = div[cols]
+            if progress:
+                progress(nb * S)
+        return pred, diverged
+
+    def base_channels(self, bi: int, b: Bucket) -> dict:
+        """The base model's raw channels of bucket ``bi`` (simulated once, then reused)."""
+        if bi not in self._base_channels:
+            from .candidates import Candidate
+
+            nb = len(b.tests)
+            base = _stack([self.base[j] for j in b.tests])
+            prof = VoltageProfile(jnp.asarray(b.grid_t, base.dtype), jnp.asarray(b.volts, base.dtype))
+            traj = _simulate_jit(base, prof, initial_state(base, (nb,)), n_steps=b.n_steps, dt=float(b.dt),
+                                 substeps=b.substeps)
+            self.n_vehicle_seconds += nb * b.n_steps * b.dt
+            self._base_channels[bi] = ({k: np.asarray(v, np.float64) for k, v in traj.channels.items()},
+                                       np.asarray(traj.diverged))
+        return self._base_channels[bi][0]
+
+    def _instrument_only(self, bi: int, b: Bucket, cand: Candidate, values: dict, S: int) -> dict:
+        """An effect that only transforms instruments: apply it to the base trajectory, no new simulation."""
+        nb = len(b.tests)
+        ch = {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
+        base = _stack([self.base[j] for j in b.tests])
+        base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
+        vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
+        params = cand.apply(base, vals, {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)})
+        t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
+        for eff in params.effects:
+            ch = _instruments_jit(eff, {k: jnp.asarray(v, params.dtype) for k, v in ch.items()}, t, params)
+        return {k: np.asarray(v, np.float64) for k, v in ch.items()}
+
+    def _at_log(self, j: int, ch: dict) -> dict:
+        test = self.tests[j]
+        i0, w = self._interp[j]
+        out = {}
+        for sig in test.measured:
+            if sig in ("x", "y", "heading"):
+                continue
+            v = ch[sig]
+            v = v[i0] * (1.0 - w) + v[i0 + 1] * w
+            if sig in ("i_left", "i_right") and test.sensor == "absolute":
+                v = np.abs(v)
+            out[sig] = v
+        if any(s in test.measured for s in ("x", "y", "heading")):
+            xs, ys, hs = (ch[k][i0] * (1.0 - w) + ch[k][i0 + 1] * w for k in ("x", "y", "heading"))
+            x0, y0, h0 = test.pose0
+            c, s = math.cos(h0), math.sin(h0)
+            pose = {"x": x0 + c * xs - s * ys, "y": y0 + s * xs + c * ys, "heading": h0 + hs}
+            out.update({k: v for k, v in pose.items() if k in test.measured})
+        return out

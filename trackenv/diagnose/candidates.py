@@ -1,0 +1,182 @@
+"""The candidate explanations of a gap, each a family of models with a few fitted parameters.
+
+A candidate is the base model plus one MODEL.md §8 effect whose *identifying* parameters are fitted
+(the others keep the library's calibrated defaults), or the control ``recalibrate_base`` (no effect;
+the uncertain base parameters b*_int, c, φ, K are fitted: the gap that mere tuning closes), or
+``none`` (the base model as is). Parameters are searched in a unit cube: each maps to its physical
+range linearly or logarithmically (``ParamSpec``). Every candidate contains (a point close to) the base
+model — its ``anchor`` — so a fit can only match or improve on ``none`` in-sample; whether it improves
+*out of sample* is what the diagnosis measures.
+
+Ranges are the physically plausible ones (the effect classes' ``bounds`` are wider, for users):
+
+- ``slip_sinkage``: k_s 0.02-3 1/m, k_b 0.05-5, z_max 0.01-0.1 m (γ, v_s: defaults);
+- ``lateral_friction_radius``: μ_max 0.1-1.5, b 0.01-3 1/m, μ_min 0-0.6 (a = 0.925, Wong & Chiang);
+- ``internal_resistance``: b0 = f0 · b*_int(terrain) with f0 0-3, b1 0-0.2 N m s/rad, b2 0-0.01
+  N m s²/rad² (the family constant / viscous / speed-linear / quadratic; f0 scales each terrain's Table 5.4 value so one fit serves
+  tests on several terrains);
+- ``grouser_stiction``: M0 0.5-30 N m, r_fade 0.1-5 rad/s, F0 0-60 N;
+- ``pitch_load_transfer``: height factor 0-3, τ 0.01-0.5 s;
+- ``sensor_artifacts``: encoder window 0-1 s, gyro bias ±0.1 rad/s (ripple is not fitted: a
+  ripple is indistinguishable from noise in an RMS comparison; rectification comes from meta.json);
+- ``recalibrate_base``: factors on b*_int (and b_int) 0.7-1.4, c 0.5-2, φ 0.9-1.1, K 0.5-2 (the
+  plausible uncertainty of measured soil values; wider ranges let four parameters chase the noise of
+  the calibration tests and lose out of sample, which would blunt the control).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..effects import get_effect
+
+NONE = "none"
+RECALIBRATE = "recalibrate_base"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    lo: float
+    hi: float
+    log: bool = False
+    unit: str = ""
+
+    def to_physical(self, u):
+        u = np.clip(np.asarray(u, np.float64), 0.0, 1.0)
+        if self.log:
+            return np.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
+        return self.lo + u * (self.hi - self.lo)
+
+    def to_unit(self, x):
+        x = np.asarray(x, np.float64)
+        if self.log:
+            return np.clip((np.log(x) - math.log(self.lo)) / (math.log(self.hi) - math.log(self.lo)), 0.0, 1.0)
+        return np.clip((x - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A candidate explanation: ``name`` (effect id, ``recalibrate_base`` or ``none``) and its fitted parameters."""
+
+    name: str
+    specs: tuple
+    anchor: dict  # physical values of the point closest to the base model
+    description: str
+
+    @property
+    def n_params(self) -> int:
+        return len(self.specs)
+
+    @property
+    def encoder_layer(self) -> bool:
+        """True if the fit also selects an encoder averaging window (:mod:`.fit`)."""
+        return self.name not in (NONE, RECALIBRATE, "sensor_artifacts")
+
+    @property
+    def instrument_only(self) -> bool:
+        """True if the candidate changes only the instruments (no new simulation needed)."""
+        return self.name == "sensor_artifacts"
+
+    def applicable(self, terrains_deformable: list[bool]) -> str | None:
+        """None if the candidate can act on these tests, else why not (it would equal the base model)."""
+        if self.name == "slip_sinkage" and not any(terrains_deformable):
+            return "acts on deformable ground only; every test is on hard ground"
+        if self.name == "grouser_stiction" and all(terrains_deformable):
+            return "acts on hard ground only; every test is on deformable ground"
+        return None
+
+    @property
+    def is_effect(self) -> bool:
+        return self.name not in (NONE, RECALIBRATE)
+
+    def physical(self, unit: np.ndarray) -> dict:
+        """(S, p) unit-cube points -> {name: (S,) physical values}."""
+        unit = np.atleast_2d(unit)
+        return {s.name: s.to_physical(unit[:, k]) for k, s in enumerate(self.specs)}
+
+    def anchor_unit(self) -> np.ndarray:
+        return np.array([s.to_unit(self.anchor[s.name]) for s in self.specs], np.float64)
+
+    def apply(self, base, values: dict, ref: dict):
+        """Params for a batch: ``base`` has (B,) leaves; ``values`` {name: (B,)}; ``ref`` per-vehicle references.
+
+        ``ref["b_int_constant"]``: (B,) each vehicle's terrain b*_int (Table 5.4), used by ``internal_resistance``.
+        """
+        dtype = base.dtype
+        f = lambda x: jnp.asarray(x, dtype)  # noqa: E731
+        if self.name == NONE:
+            return base
+        if self.name == RECALIBRATE:
+            ter, itr = base.terrain, base.internal
+            ter = dataclasses.replace(ter, cohesion=ter.cohesion * f(values["cohesion_factor"]),
+                                      friction_angle=ter.friction_angle * f(values["friction_angle_factor"]),
+                                      shear_modulus=ter.shear_modulus * f(values["shear_modulus_factor"]))
+            k = f(values["internal_resistance_factor"])
+            itr = dataclasses.replace(itr, constant=itr.constant * k, viscous=itr.viscous * k)
+            return dataclasses.replace(base, terrain=ter, internal=itr)
+        B = np.shape(next(iter(values.values())))[0]
+        eff = get_effect(self.name, dtype=dtype)
+        fields = {}
+        for fl in dataclasses.fields(eff):
+            v = getattr(eff, fl.name)
+            fields[fl.name] = jnp.broadcast_to(v, (B,)) if eqx.is_array(v) else v
+        if self.name == "internal_resistance":
+            fields["b0"] = f(values["b0_factor"] * ref["b_int_constant"])
+            fields["b1"] = f(values["b1"])
+            fields["b2"] = f(values["b2"])
+        else:
+            for k, v in values.items():
+                fields[k] = f(v)
+        if self.name == "sensor_artifacts":
+            fields["ripple_amplitude"] = jnp.zeros((B,), dtype)
+            fields["rectify"] = False
+        return dataclasses.replace(base, effects=(type(eff)(**fields),))
+
+
+def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
+    """The candidates of a diagnosis (effects in MODEL.md §8 order, then the control, then ``none``)."""
+    viscous = internal_resistance == "viscous"
+    return [
+        Candidate("slip_sinkage", (ParamSpec("sinkage_rate", 0.02, 3.0, True, "1/m"),
+                                   ParamSpec("bulldozing_factor", 0.05, 5.0, True, "-"),
+                                   ParamSpec("max_sinkage", 0.01, 0.1, False, "m")),
+                  {"sinkage_rate": 0.02, "bulldozing_factor": 0.05, "max_sinkage": 0.01},
+                  "slip-induced sinkage with bulldozing of the displaced soil (deformable ground)"),
+        Candidate("lateral_friction_radius", (ParamSpec("mu_max", 0.1, 1.5, True, "-"),
+                                              ParamSpec("b", 0.01, 3.0, True, "1/m"),
+                                              ParamSpec("mu_min", 0.0, 0.6, False, "-")),
+                  {"mu_max": 0.53, "b": 0.15, "mu_min": 0.0},
+                  "lateral coefficient mu_t(R) = mu_min + mu_max/(a + bR) replacing the shear law sideways"),
+        Candidate("internal_resistance", (ParamSpec("b0_factor", 0.0, 3.0, False, "x b*_int"),
+                                          ParamSpec("b1", 0.0, 0.2, False, "N m s/rad"),
+                                          ParamSpec("b2", 0.0, 0.01, False, "N m s^2/rad^2")),
+                  {"b0_factor": 0.0 if viscous else 1.0, "b1": 0.076 if viscous else 0.0, "b2": 0.0},
+                  "internal track resistance b0 + b1*omega + b2*omega|omega| (constant / viscous / speed-linear / quadratic)"),
+        Candidate("grouser_stiction", (ParamSpec("yaw_moment", 0.5, 30.0, True, "N m"),
+                                       ParamSpec("yaw_fade", 0.1, 5.0, True, "rad/s"),
+                                       ParamSpec("force", 0.0, 60.0, False, "N")),
+                  {"yaw_moment": 0.5, "yaw_fade": 1.5, "force": 0.0},
+                  "breakaway resistance of grousers on hard ground, fading with yaw/forward speed"),
+        Candidate("pitch_load_transfer", (ParamSpec("height_factor", 0.0, 3.0, False, "x cg height"),
+                                          ParamSpec("time_constant", 0.01, 0.5, True, "s")),
+                  {"height_factor": 0.0, "time_constant": 0.05},
+                  "longitudinal load transfer during acceleration and braking"),
+        Candidate("sensor_artifacts", (ParamSpec("window", 0.0, 1.0, False, "s"),
+                                       ParamSpec("gyro_bias", -0.1, 0.1, False, "rad/s")),
+                  {"window": 0.0, "gyro_bias": 0.0}, "encoder averaging window and gyro bias"),
+        Candidate(RECALIBRATE, (ParamSpec("internal_resistance_factor", 0.7, 1.4, True, "-"),
+                                ParamSpec("cohesion_factor", 0.5, 2.0, True, "-"),
+                                ParamSpec("friction_angle_factor", 0.9, 1.1, True, "-"),
+                                ParamSpec("shear_modulus_factor", 0.5, 2.0, True, "-")),
+                  {"internal_resistance_factor": 1.0, "cohesion_factor": 1.0, "friction_angle_factor": 1.0,
+                   "shear_modulus_factor": 1.0},
+                  "control: refit the uncertain base parameters b*_int, c, phi, K (no new physics)"),
+        Candidate(NONE, (), {}, "the base model as is"),
+    ]
