@@ -180,6 +180,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "effect": n, "description": f.candidate.description, "n_params": f.candidate.n_params,
             "heldout_nrmse": overall_nrmse(data, sq), "heldout_gap": g,
             "heldout_gap_range": overall_gap_range(data, sq),
+            "insample_gap": overall_gap(data, sq_errors(data, f.full_pred)),
             "heldout_gap_shrink": (1.0 - g / gap_before) if gap_before > 0 else 0.0,
             "heldout_loss": float(np.sum(f.heldout_loss)), "score": sc[n],
             "params": f.full.params, "fold_params": [fd.params for fd in f.folds],
@@ -240,6 +241,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "gap_before_range": overall_gap_range(data, sq_base), "gap_after_range": overall_gap_range(data, sq_after),
             "gap_unit": "noise units: sqrt(mean over tests of mean over signals of (MSE - sigma^2)+ / (sigma^2 + (0.01 span)^2))",
             "p_beats_none": p_beats, "after_model": chosen.candidate.name,
+            "insample_gap_shrink": (1.0 - overall_gap(data, sq_errors(data, chosen.full_pred)) / gap_before)
+            if gap_before > 0 else 0.0,
             "best_candidate_shrink": shrink, "best_candidate_shrink_ci": list(shrink_ci),
         },
         "ranking": ranking,
