@@ -139,6 +139,14 @@ class FieldLog:
                     out[col] = v
         return out
 
+    def first_pose(self) -> tuple[float, float, float]:
+        """(x, y, heading) of the first sample [m, m, rad]; a missing column or value counts as 0."""
+        out = []
+        for col in ("x", "y", "heading"):
+            v = self.data[col].to_numpy(np.float64)[0] if col in self.data.columns else np.nan
+            out.append(float(v) if np.isfinite(v) else 0.0)
+        return tuple(out)
+
     def __len__(self) -> int:
         return len(self.data)
 

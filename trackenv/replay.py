@@ -136,14 +136,6 @@ def _simulated_at(traj, grid: np.ndarray, times: np.ndarray, sensor: str, pose0:
     return at
 
 
-def _first_pose(log: FieldLog) -> tuple[float, float, float]:
-    out = []
-    for col in ("x", "y", "heading"):
-        v = log.data[col].to_numpy(np.float64)[0] if col in log.data.columns else np.nan
-        out.append(float(v) if np.isfinite(v) else 0.0)
-    return tuple(out)
-
-
 def _n_steps(t_end: float, dt: float) -> int:
     return max(1, int(math.ceil(t_end / dt - 1e-9)))
 
@@ -247,7 +239,7 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
 
     say("comparing with the log")
     sensor = log.current_sensor
-    pose0 = _first_pose(log)
+    pose0 = log.first_pose()
     sim = _simulated_at(traj, grid, tt, sensor, pose0)
     measured = log.measured()
     channels, absent = {}, []

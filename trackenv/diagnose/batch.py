@@ -159,20 +159,10 @@ class BatchSimulator:
                 for q, j in enumerate(b.tests):
                     pred[j] = self._at_log(j, {k: v[:, q * S:(q + 1) * S] for k, v in ch.items()})
                 continue
-            base = _stack([self.base[j] for j in b.tests])  # leaves (nb,)
-            base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
-            vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
-            ref = {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)}
-            params = cand.apply(base, vals, ref)
-            volts = np.repeat(b.volts, S, axis=-1)
-            prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
-            state0 = initial_state(params, (nb * S,))
-            traj = _simulate_jit(params, prof, state0, n_steps=b.n_steps, dt=float(b.dt), substeps=b.substeps)
-            ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
-            div = np.asarray(traj.diverged)
+            params = self._params(b, cand, values, S)
+            ch, div = self._simulate(b, params, nb * S)
             if cand.name == "none" and S == 1:
                 self._base_channels[bi] = (ch, div)
-            self.n_vehicle_seconds += nb * S * b.n_steps * b.dt
             for q, j in enumerate(b.tests):
                 cols = slice(q * S, (q + 1) * S)
                 pred[j] = self._at_log(j, {k: v[:, cols] for k, v in ch.items()})
@@ -183,29 +173,34 @@ class BatchSimulator:
                 progress(nb * S)
         return pred, diverged
 
+    def _params(self, b: Bucket, cand: Candidate, values: dict, S: int):
+        """Params of bucket ``b`` with ``S`` parameter sets of ``cand`` per test: leaves (nb * S,)."""
+        nb = len(b.tests)
+        base = _stack([self.base[j] for j in b.tests])  # leaves (nb,)
+        base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
+        vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
+        return cand.apply(base, vals, {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)})
+
+    def _simulate(self, b: Bucket, params, n_vehicles: int) -> tuple[dict, np.ndarray]:
+        """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,)."""
+        volts = np.repeat(b.volts, n_vehicles // len(b.tests), axis=-1)
+        prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
+        traj = _simulate_jit(params, prof, initial_state(params, (n_vehicles,)), n_steps=b.n_steps, dt=float(b.dt),
+                             substeps=b.substeps)
+        self.n_vehicle_seconds += n_vehicles * b.n_steps * b.dt
+        return {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}, np.asarray(traj.diverged)
+
     def base_channels(self, bi: int, b: Bucket) -> dict:
         """The base model's raw channels of bucket ``bi`` (simulated once, then reused)."""
         if bi not in self._base_channels:
-            from .candidates import Candidate
-
-            nb = len(b.tests)
             base = _stack([self.base[j] for j in b.tests])
-            prof = VoltageProfile(jnp.asarray(b.grid_t, base.dtype), jnp.asarray(b.volts, base.dtype))
-            traj = _simulate_jit(base, prof, initial_state(base, (nb,)), n_steps=b.n_steps, dt=float(b.dt),
-                                 substeps=b.substeps)
-            self.n_vehicle_seconds += nb * b.n_steps * b.dt
-            self._base_channels[bi] = ({k: np.asarray(v, np.float64) for k, v in traj.channels.items()},
-                                       np.asarray(traj.diverged))
+            self._base_channels[bi] = self._simulate(b, base, len(b.tests))
         return self._base_channels[bi][0]
 
     def _instrument_only(self, bi: int, b: Bucket, cand: Candidate, values: dict, S: int) -> dict:
         """An effect that only transforms instruments: apply it to the base trajectory, no new simulation."""
-        nb = len(b.tests)
         ch = {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
-        base = _stack([self.base[j] for j in b.tests])
-        base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
-        vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
-        params = cand.apply(base, vals, {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)})
+        params = self._params(b, cand, values, S)
         t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
         for eff in params.effects:
             ch = _instruments_jit(eff, {k: jnp.asarray(v, params.dtype) for k, v in ch.items()}, t, params)

@@ -30,7 +30,7 @@ from .candidates import NONE, RECALIBRATE, candidate_set
 from .data import DiagnosisError, TestData, load_tests
 from .fit import CandidateFit, fit_candidate, make_folds
 from .metrics import (block_indices, bootstrap_shrink, cell_ci, cell_table, gap_carriers, overall_gap,
-                      overall_gap_range, overall_nrmse, sq_errors)
+                      overall_gap_range, overall_nrmse, signal_weight, sq_errors)
 
 COMPLEXITY = 0.02
 MIN_SHRINK = 0.20
@@ -57,19 +57,11 @@ class Diagnosis:
         return self.report["verdict"]
 
 
-def _weighted_sq(tests: list[TestData], pred: list[dict]) -> list[np.ndarray]:
-    """Per test: (K,) the loss's per-sample term (mean over signals of weighted squared error)."""
-    from .fit import signal_weight
-
+def _weighted_sq(tests: list[TestData], sq: list[dict]) -> list[np.ndarray]:
+    """Per test: (K,) the loss's per-sample term (mean over signals of weighted squared error, :func:`sq_errors`)."""
     out = []
     for j, t in enumerate(tests):
-        terms = []
-        for sig, meas in t.measured.items():
-            e = np.where(t.fit_mask, pred[j][sig] - meas, np.nan)
-            if sig == "heading":
-                e = (e + np.pi) % (2 * np.pi) - np.pi
-            terms.append(e**2 * signal_weight(t, sig))
-        st = np.stack(terms)
+        st = np.stack([e2 * signal_weight(t, sig) for sig, e2 in sq[j].items()])
         n_ok = np.sum(np.isfinite(st), axis=0)
         out.append(np.where(n_ok > 0, np.nansum(st, axis=0) / np.maximum(n_ok, 1), np.nan))
     return out
@@ -165,8 +157,10 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     bar.close()
 
     base = fits[NONE]
-    sq_base = sq_errors(data, base.full_pred)
-    ws = {n: _weighted_sq(data, f.heldout_pred) for n, f in fits.items()}
+    sq_held = {n: sq_errors(data, f.heldout_pred) for n, f in fits.items()}
+    sq_full = {n: sq_errors(data, f.full_pred) for n, f in fits.items()}
+    sq_base = sq_full[NONE]
+    ws = {n: _weighted_sq(data, sq) for n, sq in sq_held.items()}
     sc = _scores(fits)
     gap_before = overall_gap(data, sq_base)
     noise_ratio_max = max(float(np.nanmean(sq_base[j][s]) / t.noise[s] ** 2) for j, t in enumerate(data)
@@ -174,13 +168,13 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     significant = bool(gap_before >= MIN_GAP and noise_ratio_max >= MIN_NOISE_RATIO)
     ranking = []
     for n, f in fits.items():
-        sq = sq_errors(data, f.heldout_pred)
+        sq = sq_held[n]
         g = overall_gap(data, sq)
         ranking.append({
             "effect": n, "description": f.candidate.description, "n_params": f.candidate.n_params,
             "heldout_nrmse": overall_nrmse(data, sq), "heldout_gap": g,
             "heldout_gap_range": overall_gap_range(data, sq),
-            "insample_gap": overall_gap(data, sq_errors(data, f.full_pred)),
+            "insample_gap": overall_gap(data, sq_full[n]),
             "heldout_gap_shrink": (1.0 - g / gap_before) if gap_before > 0 else 0.0,
             "heldout_loss": float(np.sum(f.heldout_loss)), "score": sc[n],
             "params": f.full.params, "fold_params": [fd.params for fd in f.folds],
@@ -220,7 +214,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         effect = NONE
     confidence = agree / n_boot
     chosen = fits[effect] if effect != NONE else fits[best]
-    sq_after = sq_errors(data, chosen.heldout_pred)
+    sq_after = sq_held[chosen.candidate.name]
     gap_after = overall_gap(data, sq_after)
     shrink = (1.0 - gap_after / gap_before) if gap_before > 0 else 0.0
     shrink_ci = bootstrap_shrink(data, sq_base, sq_after, seed=seed)
@@ -241,7 +235,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "gap_before_range": overall_gap_range(data, sq_base), "gap_after_range": overall_gap_range(data, sq_after),
             "gap_unit": "noise units: sqrt(mean over tests of mean over signals of (MSE - sigma^2)+ / (sigma^2 + (0.01 span)^2))",
             "p_beats_none": p_beats, "after_model": chosen.candidate.name,
-            "insample_gap_shrink": (1.0 - overall_gap(data, sq_errors(data, chosen.full_pred)) / gap_before)
+            "insample_gap_shrink": (1.0 - overall_gap(data, sq_full[chosen.candidate.name]) / gap_before)
             if gap_before > 0 else 0.0,
             "best_candidate_shrink": shrink, "best_candidate_shrink_ci": list(shrink_ci),
         },

@@ -96,14 +96,6 @@ def robust_span(x: np.ndarray) -> float:
     return float(hi - lo)
 
 
-def _first_pose(log: FieldLog) -> tuple:
-    out = []
-    for col in ("x", "y", "heading"):
-        v = log.data[col].to_numpy(np.float64)[0] if col in log.data.columns else np.nan
-        out.append(float(v) if np.isfinite(v) else 0.0)
-    return tuple(out)
-
-
 def prepare_test(log: FieldLog, name: str) -> TestData:
     """Check one read log and derive what the diagnosis needs (raises :class:`DiagnosisError` if unusable)."""
     t_raw = log.t
@@ -144,7 +136,7 @@ def prepare_test(log: FieldLog, name: str) -> TestData:
     phase = segment_phases(t, volts)
     return TestData(name=name, folder=log.folder, log=log, t=t, volts=volts, measured=measured,
                     phase=phase, noise=noise, span=span, t_offset=float(t_raw[0]),
-                    pose0=_first_pose(log), notes=notes, fit_mask=fit_mask(t, phase))
+                    pose0=log.first_pose(), notes=notes, fit_mask=fit_mask(t, phase))
 
 
 def fit_mask(t: np.ndarray, phase: np.ndarray) -> np.ndarray:

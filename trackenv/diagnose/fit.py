@@ -40,25 +40,18 @@ from scipy.stats import qmc
 from .batch import BatchSimulator
 from .candidates import Candidate
 from .data import TestData
+from .metrics import MODEL_FLOOR, signal_error, signal_weight  # noqa: F401  (MODEL_FLOOR: the loss's floor)
 
 MAX_FOLDS = 6
 ENCODER_WINDOWS = (0.0, 0.05, 0.1, 0.2, 0.35)  # s, the encoder layer every candidate but none carries
-MODEL_FLOOR = 0.01  # fraction of a signal's range a model is expected to match
-
-
-def signal_weight(test: TestData, sig: str) -> float:
-    return 1.0 / (test.noise[sig] ** 2 + (MODEL_FLOOR * test.span[sig]) ** 2)
 
 
 def test_loss(test: TestData, pred: dict) -> np.ndarray:
     """Loss of predictions ``pred[sig]`` (K, S) on one test -> (S,)."""
     terms = []
     for sig, meas in test.measured.items():
-        p = pred[sig]
         ok = np.isfinite(meas) & test.fit_mask
-        err = p[ok] - meas[ok, None]
-        if sig == "heading":
-            err = (err + np.pi) % (2 * np.pi) - np.pi
+        err = signal_error(test, sig, pred[sig])[ok]
         terms.append(np.mean(err**2, axis=0) * signal_weight(test, sig))
     out = np.mean(terms, axis=0)
     return np.where(np.isfinite(out), out, np.inf)

@@ -25,10 +25,18 @@ from .data import TestData
 
 BLOCK_S = 0.5
 N_BOOT = 300
+MODEL_FLOOR = 0.01  # fraction of a signal's range a model is expected to match (the fit's loss, :mod:`.fit`)
 
 
-def _err(test: TestData, sig: str, pred: np.ndarray) -> np.ndarray:
-    e = pred - test.measured[sig]
+def signal_weight(test: TestData, sig: str) -> float:
+    """1 / (σ² + (MODEL_FLOOR · span)²): the weight of a squared error of ``sig`` in the loss and the gap."""
+    return 1.0 / (test.noise[sig] ** 2 + (MODEL_FLOOR * test.span[sig]) ** 2)
+
+
+def signal_error(test: TestData, sig: str, pred: np.ndarray) -> np.ndarray:
+    """sim − meas of ``sig`` for predictions (K,) or (K, S); heading errors wrapped to (−π, π]."""
+    meas = test.measured[sig]
+    e = pred - meas.reshape(meas.shape + (1,) * (np.ndim(pred) - 1))
     if sig == "heading":
         e = (e + np.pi) % (2 * np.pi) - np.pi
     return e
@@ -57,8 +65,8 @@ def cell_table(tests: list[TestData], before: list[dict], after: list[dict] | No
     rows = []
     for j, test in enumerate(tests):
         for sig in test.measured:
-            eb = _err(test, sig, before[j][sig])
-            ea = _err(test, sig, after[j][sig]) if after is not None else None
+            eb = signal_error(test, sig, before[j][sig])
+            ea = signal_error(test, sig, after[j][sig]) if after is not None else None
             ok = np.isfinite(eb)
             sigma2 = test.noise[sig] ** 2
             span = test.span[sig]
@@ -102,14 +110,12 @@ def gap_carriers(rows: list[dict], cover: float = 0.6, max_cells: int = 6) -> li
 
 def sq_errors(tests: list[TestData], pred: list[dict]) -> list[dict]:
     """Per test, per signal: squared errors (K,) (NaN where not measured or outside the fit mask)."""
-    return [{sig: np.where(t.fit_mask, _err(t, sig, pred[j][sig]) ** 2, np.nan) for sig in t.measured}
+    return [{sig: np.where(t.fit_mask, signal_error(t, sig, pred[j][sig]) ** 2, np.nan) for sig in t.measured}
             for j, t in enumerate(tests)]
 
 
 def overall_gap(tests: list[TestData], sq: list[dict], idx: list[np.ndarray] | None = None) -> float:
     """Systematic gap of a model over tests, in noise units (see the module docstring)."""
-    from .fit import signal_weight
-
     per_test = []
     for j, t in enumerate(tests):
         vals = []
