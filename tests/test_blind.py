@@ -177,8 +177,10 @@ def test_random_profile_bounds(maneuver):
             assert np.allclose(v[:, 0], -v[:, 1]) and 6.0 <= np.abs(v).max() <= 16.0
         if maneuver == "go_stop":
             assert np.allclose(v[:, 0], v[:, 1]) and 5.0 <= np.abs(v).max()
-        if maneuver in ("j_turn", "lane_change"):
+        if maneuver in ("j_turn", "lane_change", "step_steer"):
             assert np.abs(v[:, 0] - v[:, 1]).max() >= 3.0 - 1e-9
+        if maneuver == "accel_steps":
+            assert np.allclose(v[:, 0], v[:, 1]) and len(set(np.round(np.abs(v[:, 0]), 6)) - {0.0}) >= 2
 
 
 def test_balanced_labels():
@@ -229,8 +231,11 @@ def test_cases_valid_and_no_label_leaked(bench):
         mans = [t["maneuver"] for t in a["tests"]]
         assert set(mans) & set(blind.TURNING)
         if a["label"] in ("slip_sinkage", "grouser_stiction"):
-            assert "zero_radius_turn" in mans
-        assert a["terrain"] == {"slip_sinkage": "dry_sand", "grouser_stiction": "asphalt"}.get(a["label"], a["terrain"])
+            assert {"zero_radius_turn", "random_steer"} & set(mans)
+        if a["label"] == "slip_sinkage":
+            assert a["terrain"] in blind.DEFORMABLE_TERRAINS
+        if a["label"] == "grouser_stiction":
+            assert a["terrain"] in blind.HARD_TERRAINS
         for folder, tst in zip(folders, a["tests"]):
             assert sorted(p.name for p in folder.iterdir()) == ["log.csv", "meta.json"]
             log = read_field_log(folder)

@@ -155,7 +155,8 @@ def _demo_diagnoses(out: Path) -> list[str]:
         where = (f"{c['test']} / {c['signal']} / {c['phase']} (NRMSE {100 * c['nrmse_before']:.0f}%, bias "
                  f"{c['bias_before']:+.2f})") if c else "-"
         shrink = (f"{100 * v['heldout_gap_shrink']:.0f}% (95% CI {100 * v['heldout_gap_shrink_ci'][0]:.0f}-"
-                  f"{100 * v['heldout_gap_shrink_ci'][1]:.0f}%)") if v["effect"] != "none" else "-"
+                  f"{100 * v['heldout_gap_shrink_ci'][1]:.0f}%); in-sample {100 * v['insample_gap_shrink']:.0f}%"
+                  ) if v["effect"] != "none" else "-"
         lines.append(f"| {what} | {evidence} | {where} | **{v['effect']}** (confidence {v['confidence']:.2f}) | "
                      f"{shrink} | [report](diagnose/{name}/report.md) |")
     return lines
@@ -302,11 +303,11 @@ def cmd_diagnose(args) -> int:
     only = [x for x in args.tests.split(",") if x] if args.tests else None
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None
     d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
-                 seed=args.seed, figures=not args.no_figures, progress=True)
+                 seed=args.seed, figures=not args.no_figures, progress=True, polish_iters=args.polish_iters,
+                 alpha=args.alpha)
     v = d.verdict
     print(f"{d.report['data_label']}")
-    print(f"verdict: {v['effect']} (confidence {v['confidence']:.2f}); held-out systematic gap "
-          f"{100 * v['gap_before_range']:.1f}% -> {100 * v['gap_after_range']:.1f}% of range" + ("" if v["effect"] != "none" else f"; {v['reason']}"))
+    print(f"verdict: {v['verdict_line']}")
     for c in d.report["gap_cells"][:3]:
         print(f"  gap in {c['test']} / {c['signal']} / {c['phase']}: NRMSE {100 * c['nrmse_before']:.1f}%, "
               f"bias {c['bias_before']:+.3g}")
@@ -318,7 +319,16 @@ def cmd_diagnose_benchmark(args) -> int:
     from trackenv.diagnose.benchmark import run_benchmark
 
     labels = [x for x in args.labels.split(",") if x] if args.labels else None
-    res = run_benchmark(args.out, args.cases, seed=args.seed, null_fraction=args.null_fraction, labels=labels)
+    if args.rescore:
+        from trackenv.diagnose.benchmark import rescore
+
+        s = rescore(args.out, alpha=args.alpha)
+        s.pop("rows")
+        print(json.dumps({k: v for k, v in s.items() if k != "confusion"}, indent=1))
+        return 0
+    res = run_benchmark(args.out, args.cases, seed=args.seed, null_fraction=args.null_fraction, labels=labels,
+                        n_tests=args.tests_per_case, t_max=args.t_max, near_limit_fraction=args.near_limit_fraction,
+                        rounds=args.rounds, polish_iters=args.polish_iters, alpha=args.alpha)
     s = res["summary"]
     print(json.dumps({k: v for k, v in s.items() if k != "confusion"}, indent=1))
     print(f"report: {Path(args.out) / 'benchmark.md'}")
@@ -407,6 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--candidates", default=None, help="comma-separated candidate names (default: all)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    g.add_argument("--polish-iters", type=int, default=4, help="Levenberg-Marquardt iterations per fit (0: none)")
+    g.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdict rule")
     g.set_defaults(func=cmd_diagnose)
     b = sub.add_parser("diagnose-benchmark", help="withheld-effect check: blind SYNTHETIC cases, confusion matrix")
     b.add_argument("--cases", type=int, default=14, help="number of blind cases")
@@ -415,6 +427,15 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--null-fraction", type=float, default=0.2)
     b.add_argument("--labels", default=None, help="comma-separated labels, one case each (overrides --cases)")
     b.add_argument("--min-top1", type=float, default=None, help="exit 1 if top-1 accuracy is below this")
+    b.add_argument("--tests-per-case", type=int, default=None, help="tests per case (default random 3-6)")
+    b.add_argument("--t-max", type=float, default=None, help="longest test [s] (default 15)")
+    b.add_argument("--near-limit-fraction", type=float, default=1 / 3,
+                   help="fraction of effect cases drawn near the detection limit (1-3 noise sigma)")
+    b.add_argument("--rounds", type=int, default=3, help="cross-entropy rounds of the search")
+    b.add_argument("--polish-iters", type=int, default=4, help="Levenberg-Marquardt iterations per fit")
+    b.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdict rule")
+    b.add_argument("--rescore", action="store_true",
+                   help="re-apply the verdict rule to the cached cases in --out (no fitting)")
     b.set_defaults(func=cmd_diagnose_benchmark)
     return p
 

@@ -49,13 +49,18 @@ def _grid_dt(tests: list[TestData], substep: float) -> float:
     return k * substep
 
 
-def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP) -> list[Bucket]:
-    dt = _grid_dt(tests, substep)
+def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP, pad_s: float | None = None) -> list[Bucket]:
+    """Buckets of tests; with ``pad_s`` [s] every test goes into one bucket padded to ``pad_s`` (at least the
+    longest test), at a 20 ms output step and 10 ms voltage grid: fixed shapes, so that a series of
+    diagnoses of equally many tests (a benchmark) reuses the compiled programs."""
+    dt = _grid_dt(tests, substep) if pad_s is None else max(1, int(round(0.02 / substep))) * substep
     substeps = max(1, int(round(dt / substep)))
     order = sorted(range(len(tests)), key=lambda j: -tests[j].duration)
     groups: list[list[int]] = []
     for j in order:
-        if groups and tests[j].duration >= 0.5 * tests[groups[-1][0]].duration:
+        if pad_s is not None and groups:
+            groups[-1].append(j)
+        elif groups and tests[j].duration >= 0.5 * tests[groups[-1][0]].duration:
             groups[-1].append(j)
         else:
             groups.append([j])
@@ -63,8 +68,10 @@ def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP) -> list[Bu
     for g in groups:
         g = sorted(g)
         t_end = max(tests[j].duration for j in g)
+        if pad_s is not None:
+            t_end = max(t_end, pad_s)
         n_steps = int(math.ceil(t_end / dt - 1e-9)) + 1
-        hv = min(0.01, min(float(np.min(np.diff(tests[j].t))) for j in g))
+        hv = min(0.01, min(float(np.min(np.diff(tests[j].t))) for j in g)) if pad_s is None else 0.01
         grid = np.arange(int(math.ceil(n_steps * dt / hv)) + 2) * hv
         volts = np.stack([np.stack([np.interp(grid, tests[j].t, tests[j].volts[:, c]) for c in range(2)], 0)
                           for j in g], -1)  # (2, G, nb) -> transpose
@@ -103,11 +110,12 @@ def _stack(trees):
 class BatchSimulator:
     """Simulates candidates' parameter sets on every test; returns predictions at the logs' sample times."""
 
-    def __init__(self, tests: list[TestData], internal_resistance: str = "constant", substep: float = FIT_SUBSTEP):
+    def __init__(self, tests: list[TestData], internal_resistance: str = "constant", substep: float = FIT_SUBSTEP,
+                 pad_s: float | None = None):
         self.tests = tests
         self.substep = substep
         self.internal_resistance = internal_resistance
-        self.buckets = make_buckets(tests, substep)
+        self.buckets = make_buckets(tests, substep, pad_s)
         self.base = [load_params(t.terrain, vehicle=t.vehicle, internal_resistance=internal_resistance) for t in tests]
         self.b_int_constant = np.array(
             [float(load_params(t.terrain, vehicle=t.vehicle, internal_resistance="constant").internal.constant)

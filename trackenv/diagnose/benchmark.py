@@ -6,7 +6,14 @@ type and small base-parameter perturbations). Each case folder is diagnosed by :
 without its label (the answer key is stored outside the case folders and read only afterwards).
 Reported: the confusion matrix (true label × verdict), top-1 accuracy, the false-positive rate on
 null cases (an effect named where there is none), and the held-out gap shrink of the verdict on the
-cases it got right; plus per case the verdict, confidence, shrink, and wall time.
+cases it got right; plus per case the verdict, confidence, shrink, and wall time; and the detection
+power against the effect's size (``power.png``: the fraction of effect cases named correctly per bin
+of the answer key's visibility, the largest 0.25 s-averaged difference the effect makes, in noise σ).
+
+Every case's expensive part is cached: ``reports/<case>/evidence.{json,npz}`` holds each candidate's
+per-sample held-out and in-sample loss terms and the gap statistics (:func:`.core.save_evidence`).
+A case whose cache exists is not re-fitted, and :func:`rescore` re-applies the verdict rule
+(:func:`.core.decide`, e.g. with another α) to every case in seconds.
 """
 
 from __future__ import annotations
@@ -73,10 +80,68 @@ def confusion_figure(summary: dict, path: Path) -> Path:
     return path
 
 
+def power_figure(rows: list[dict], path: Path, edges=(0, 1, 2, 3, 4, 8, 16, 1e9)) -> Path:
+    """Detection power (effect named correctly) against the effect's visibility [noise σ], with counts."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    eff = [r for r in rows if r["label"] != NONE and r.get("visibility") is not None]
+    xs, ys, ns, lo, hi = [], [], [], [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        sel = [r for r in eff if a <= r["visibility"] < b]
+        if not sel:
+            continue
+        k = sum(r["verdict"] == r["label"] for r in sel)
+        n = len(sel)
+        from scipy.stats import beta
+
+        xs.append(np.median([r["visibility"] for r in sel]))
+        ys.append(k / n)
+        ns.append(n)
+        lo.append(beta.ppf(0.025, k, n - k + 1) if k > 0 else 0.0)
+        hi.append(beta.ppf(0.975, k + 1, n - k) if k < n else 1.0)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ys_a = np.array(ys)
+    ax.errorbar(xs, ys, yerr=[ys_a - np.array(lo), np.array(hi) - ys_a], fmt="o-", capsize=3,
+                label="effect named correctly (95% Clopper-Pearson)")
+    any_eff = [sum(r["verdict"] != NONE for r in eff if a <= r["visibility"] < b) for a, b in zip(edges[:-1], edges[1:])]
+    for x, y, n in zip(xs, ys, ns):
+        ax.annotate(f"n={n}", (x, y), textcoords="offset points", xytext=(4, -12), fontsize=7)
+    nulls = [r for r in rows if r["label"] == NONE]
+    if nulls:
+        ax.axhline(sum(r["verdict"] != NONE for r in nulls) / len(nulls), color="tab:red", ls="--", lw=1,
+                   label=f"null false-positive rate ({len(nulls)} null cases)")
+    ax.set_xscale("log")
+    ax.set_xlabel("effect size: max 0.25 s-averaged difference it makes [noise σ] (answer key)")
+    ax.set_ylabel("fraction")
+    ax.set_ylim(-0.05, 1.05)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title("detection power vs effect size (SYNTHETIC blind cases)", fontsize=9)
+    del any_eff
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _row(a: dict, v: dict, rank: dict, wall_s: float) -> dict:
+    return {"case": a["case"], "label": a["label"], "verdict": v["effect"], "confidence": v["confidence"],
+            "best_candidate": v["best_candidate"], "reason": v["reason"], "verdict_line": v.get("verdict_line", ""),
+            "shrink": v["heldout_gap_shrink"], "insample_shrink": v.get("insample_gap_shrink"),
+            "shrink_ci": v.get("heldout_gap_shrink_ci"), "gap_before": v["gap_before"],
+            "gap_p": (v.get("gap_test") or {}).get("p"),
+            "true_effect_shrink": rank[a["label"]]["heldout_gap_shrink"] if a["label"] in rank else None,
+            "terrain": a["terrain"], "n_tests": len(a["tests"]), "near_limit": a.get("near_limit", False),
+            "visibility": a.get("max_visibility"),
+            "maneuvers": [t["maneuver"] for t in a["tests"]], "wall_s": wall_s}
+
+
 def run_benchmark(out_dir: str | Path, n_cases: int, seed: int = 0, null_fraction: float = 0.2,
-                  labels: list[str] | None = None, n_tests: int | None = None, progress: bool = True,
-                  **diagnose_kwargs) -> dict:
-    """Generate ``n_cases`` blind cases in ``out_dir``, diagnose each, score against the withheld labels."""
+                  labels: list[str] | None = None, n_tests: int | None = None, t_max: float | None = None,
+                  near_limit_fraction: float = 1 / 3, progress: bool = True, **diagnose_kwargs) -> dict:
+    """Generate ``n_cases`` blind cases in ``out_dir`` (kept if already there), diagnose each (cached), score
+    against the withheld labels. ``n_tests``/``t_max``: tests per case and their longest duration [s]."""
     from tqdm.auto import tqdm
 
     from . import blind
@@ -84,47 +149,94 @@ def run_benchmark(out_dir: str | Path, n_cases: int, seed: int = 0, null_fractio
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    if labels:
+    if (out / "answers.json").exists():
+        answers = json.loads((out / "answers.json").read_text())
+    elif labels:
         answers = []
         for k, lab in enumerate(labels):
+            near = lab != NONE and near_limit_fraction > 0 and k % max(1, round(1 / near_limit_fraction)) == 1
             truth = blind.make_case(out / "cases" / f"case_{k:03d}", np.random.default_rng([seed, k]), label=lab,
-                                    n_tests=n_tests)
+                                    n_tests=n_tests, t_max=t_max, near_limit=near)
             answers.append({"case": f"case_{k:03d}", **truth})
         (out / "answers.json").write_text(json.dumps(answers, indent=1) + "\n", encoding="utf-8")
     else:
-        answers = blind.make_cases(out, n_cases, seed=seed, null_fraction=null_fraction)
+        answers = blind.make_cases(out, n_cases, seed=seed, null_fraction=null_fraction, n_tests=n_tests,
+                                   t_max=t_max, near_limit_fraction=near_limit_fraction)
     t_gen = time.perf_counter() - t0
+    pad = diagnose_kwargs.pop("pad_s", None)
+    if pad is None and t_max is not None:
+        pad = t_max
     rows = []
     for a in tqdm(answers, desc="diagnosing blind cases", unit="case", disable=not progress):
+        rep_dir = out / "reports" / a["case"]
+        row_file = rep_dir / "row.json"
+        if row_file.exists() and (rep_dir / "evidence.npz").exists():
+            rows.append(json.loads(row_file.read_text()))
+            continue
         t1 = time.perf_counter()
-        d = diagnose(out / "cases" / a["case"], out / "reports" / a["case"], figures=False, progress=False,
-                     seed=seed, **diagnose_kwargs)
-        v = d.verdict
+        d = diagnose(out / "cases" / a["case"], rep_dir, figures=False, progress=False, seed=seed, pad_s=pad,
+                     cache=rep_dir, **diagnose_kwargs)
         rank = {r["effect"]: r for r in d.report["ranking"]}
-        rows.append({"case": a["case"], "label": a["label"], "verdict": v["effect"], "confidence": v["confidence"],
-                     "best_candidate": v["best_candidate"], "reason": v["reason"],
-                     "shrink": v["heldout_gap_shrink"], "gap_before": v["gap_before"],
-                     "true_effect_shrink": rank[a["label"]]["heldout_gap_shrink"] if a["label"] in rank else None,
-                     "terrain": a["terrain"], "n_tests": len(a["tests"]),
-                     "maneuvers": [t["maneuver"] for t in a["tests"]], "wall_s": time.perf_counter() - t1})
+        row = _row(a, d.verdict, rank, time.perf_counter() - t1)
+        row_file.write_text(json.dumps(row, indent=1) + "\n")
+        rows.append(row)
+    return _write(out, rows, seed, {"generation_s": t_gen, "total_s": time.perf_counter() - t0})
+
+
+def rescore(out_dir: str | Path, alpha: float | None = None, **rule) -> dict:
+    """Re-apply the verdict rule to every cached case of a benchmark (no fitting): the new summary."""
+    from .core import ALPHA, decide, load_evidence
+
+    out = Path(out_dir)
+    answers = {a["case"]: a for a in json.loads((out / "answers.json").read_text())}
+    rows = []
+    for row_file in sorted((out / "reports").glob("*/row.json")):
+        row = json.loads(row_file.read_text())
+        ev = load_evidence(row_file.parent)
+        v = decide(ev, alpha=ALPHA if alpha is None else alpha, **rule)
+        c = ev["candidates"]
+        row.update({"verdict": v["effect"], "confidence": v["confidence"], "reason": v["reason"],
+                    "shrink": c[v["effect"]]["heldout_shrink"] if v["effect"] != NONE else 0.0,
+                    "visibility": answers[row["case"]].get("max_visibility")})
+        rows.append(row)
+    return summarize(rows) | {"rows": rows}
+
+
+def _write(out: Path, rows: list[dict], seed: int, timing: dict) -> dict:
     summary = summarize(rows)
-    summary["generation_s"] = t_gen
-    summary["total_s"] = time.perf_counter() - t0
+    summary.update(timing)
+    nl = [r for r in rows if r.get("near_limit")]
+    summary["near_limit_cases"] = len(nl)
+    summary["near_limit_recall"] = (sum(r["verdict"] == r["label"] for r in nl) / len(nl)) if nl else None
+    by_label = {}
+    for r in rows:
+        d = by_label.setdefault(r["label"], [0, 0])
+        d[0] += r["verdict"] == r["label"]
+        d[1] += 1
+    summary["by_label"] = {k: f"{a}/{b}" for k, (a, b) in by_label.items()}
     result = {"note": "SYNTHETIC blind cases (trackenv.diagnose.blind): alternative effect forms, labels withheld "
                       "from the diagnosis", "seed": seed, "summary": summary, "cases": rows}
     (out / "benchmark.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
     confusion_figure(summary, out / "confusion.png")
+    power_figure(rows, out / "power.png")
+    med = summary["median_heldout_shrink_when_right"]
     L = ["# Blind benchmark of `trackenv diagnose` (SYNTHETIC cases)", "",
-         f"{summary['cases']} cases ({summary['null_cases']} null), seed {seed}; effects in forms different from the "
-         "candidate library (trackenv/diagnose/blind.py); labels withheld from the diagnosis.", "",
+         f"{summary['cases']} cases ({summary['null_cases']} null, {summary['near_limit_cases']} near the detection "
+         f"limit), seed {seed}; effects in forms different from the candidate library (trackenv/diagnose/blind.py); "
+         "labels withheld from the diagnosis.", "",
          f"- top-1 accuracy: **{summary['top1_accuracy']:.2f}**",
          f"- null false-positive rate: **{summary['null_false_positive_rate']}**",
-         f"- median held-out gap shrink when right: **{summary['median_heldout_shrink_when_right']}**",
-         f"- median held-out shrink of the true effect's candidate: {summary['median_heldout_shrink_of_true_effect']}",
-         f"- median wall time per case: {summary['median_wall_s']:.0f} s", "", "![confusion](confusion.png)", "",
-         "| case | label | verdict | confidence | shrink | tests | reason |", "|---|---|---|---|---|---|---|"]
+         f"- median held-out gap shrink when right: **{'–' if med is None else f'{med:.2f}'}**",
+         f"- near-limit effect cases named correctly: {summary['near_limit_recall']}",
+         f"- by label (correct/cases): {', '.join(f'{k} {v}' for k, v in summary['by_label'].items())}",
+         f"- median wall time per case: {summary['median_wall_s']:.0f} s", "",
+         "![confusion](confusion.png) ![power](power.png)", "",
+         "| case | label | verdict | confidence | held-out shrink | in-sample shrink | size [σ] | tests | reason |",
+         "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        vis = "–" if r.get("visibility") is None else f"{r['visibility']:.1f}" + (" (near limit)" if r.get("near_limit") else "")
+        ins = "–" if r.get("insample_shrink") is None else f"{100 * r['insample_shrink']:.0f}%"
         L.append(f"| {r['case']} | {r['label']} | {r['verdict']} | {r['confidence']:.2f} | {100 * r['shrink']:.0f}% | "
-                 f"{', '.join(r['maneuvers'])} ({r['terrain']}) | {r['reason']} |")
+                 f"{ins} | {vis} | {', '.join(r['maneuvers'])} ({r['terrain']}) | {r['reason']} |")
     (out / "benchmark.md").write_text("\n".join(L) + "\n", encoding="utf-8")
     return result

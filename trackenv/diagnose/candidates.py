@@ -12,9 +12,12 @@ Ranges are the physically plausible ones (the effect classes' ``bounds`` are wid
 
 - ``slip_sinkage``: k_s 0.02-3 1/m, k_b 0.05-5, z_max 0.01-0.1 m (γ, v_s: defaults);
 - ``lateral_friction_radius``: μ_max 0.1-1.5, b 0.01-3 1/m, μ_min 0-0.6 (a = 0.925, Wong & Chiang);
-- ``internal_resistance``: b0 = f0 · b*_int(terrain) with f0 0-3, b1 0-0.2 N m s/rad, b2 0-0.01
-  N m s²/rad² (the family constant / viscous / speed-linear / quadratic; f0 scales each terrain's Table 5.4 value so one fit serves
-  tests on several terrains);
+- ``internal_resistance``: a monotone function of |ω| (:class:`KnotInternalResistance`):
+  τ = sign(ω) · (b0 + s1·min(|ω|, 3) + s2·clip(|ω| − 3, 0, 9) + s3·max(|ω| − 12, 0)) with knots at 3 and
+  12 rad/s (0.27 and 1.07 m/s of belt speed); b0 = f0 · b*_int(terrain) with f0 0-3 (f0 scales each terrain's
+  Table 5.4 value so one fit serves tests on several terrains), slopes s1 0-0.5, s2, s3 0-0.2 N m s/rad.
+  The family holds the constant law (slopes 0), the viscous one (b0 = 0, equal slopes), speed-linear and
+  convex (quadratic-like) or concave (a low-speed knee, tanh-like) laws;
 - ``grouser_stiction``: M0 0.5-30 N m, r_fade 0.1-5 rad/s, F0 0-60 N;
 - ``pitch_load_transfer``: height factor 0-3, τ 0.01-0.5 s;
 - ``sensor_artifacts``: encoder window 0-1 s, gyro bias ±0.1 rad/s (ripple is not fitted: a
@@ -31,10 +34,36 @@ import math
 from dataclasses import dataclass
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..effects import get_effect
+from ..effects.base import Effect
+from ..physics.motor import OMEGA_SMOOTHING
+from ..physics.terramechanics import smoothsign
+
+IR_KNOTS = (3.0, 12.0)  # rad/s, knots of the internal-resistance family
+
+
+class KnotInternalResistance(Effect):
+    """``internal_resistance`` as a monotone piecewise-linear function of |ω| (knots ``IR_KNOTS``), replacing tau_int."""
+
+    id = "internal_resistance"
+    b0: jax.Array
+    s1: jax.Array
+    s2: jax.Array
+    s3: jax.Array
+
+    def torque(self, omega):
+        a = jnp.sqrt(omega * omega + OMEGA_SMOOTHING**2) - OMEGA_SMOOTHING
+        k1, k2 = IR_KNOTS
+        g = (self.b0 + self.s1 * jnp.minimum(a, k1) + self.s2 * jnp.clip(a - k1, 0.0, k2 - k1)
+             + self.s3 * jnp.maximum(a - k2, 0.0))
+        return smoothsign(omega, OMEGA_SMOOTHING) * g
+
+    def forces(self, ctx, forces, tau_int):
+        return forces, self.torque(ctx.state.omega)
 
 NONE = "none"
 RECALIBRATE = "recalibrate_base"
@@ -122,18 +151,17 @@ class Candidate:
             itr = dataclasses.replace(itr, constant=itr.constant * k, viscous=itr.viscous * k)
             return dataclasses.replace(base, terrain=ter, internal=itr)
         B = np.shape(next(iter(values.values())))[0]
+        if self.name == "internal_resistance":
+            return dataclasses.replace(base, effects=(KnotInternalResistance(
+                b0=f(values["b0_factor"] * ref["b_int_constant"]), s1=f(values["s1"]), s2=f(values["s2"]),
+                s3=f(values["s3"])),))
         eff = get_effect(self.name, dtype=dtype)
         fields = {}
         for fl in dataclasses.fields(eff):
             v = getattr(eff, fl.name)
             fields[fl.name] = jnp.broadcast_to(v, (B,)) if eqx.is_array(v) else v
-        if self.name == "internal_resistance":
-            fields["b0"] = f(values["b0_factor"] * ref["b_int_constant"])
-            fields["b1"] = f(values["b1"])
-            fields["b2"] = f(values["b2"])
-        else:
-            for k, v in values.items():
-                fields[k] = f(v)
+        for k, v in values.items():
+            fields[k] = f(v)
         if self.name == "sensor_artifacts":
             fields["ripple_amplitude"] = jnp.zeros((B,), dtype)
             fields["rectify"] = False
@@ -155,10 +183,13 @@ def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
                   {"mu_max": 0.53, "b": 0.15, "mu_min": 0.0},
                   "lateral coefficient mu_t(R) = mu_min + mu_max/(a + bR) replacing the shear law sideways"),
         Candidate("internal_resistance", (ParamSpec("b0_factor", 0.0, 3.0, False, "x b*_int"),
-                                          ParamSpec("b1", 0.0, 0.2, False, "N m s/rad"),
-                                          ParamSpec("b2", 0.0, 0.01, False, "N m s^2/rad^2")),
-                  {"b0_factor": 0.0 if viscous else 1.0, "b1": 0.076 if viscous else 0.0, "b2": 0.0},
-                  "internal track resistance b0 + b1*omega + b2*omega|omega| (constant / viscous / speed-linear / quadratic)"),
+                                          ParamSpec("s1", 0.0, 0.5, False, "N m s/rad"),
+                                          ParamSpec("s2", 0.0, 0.2, False, "N m s/rad"),
+                                          ParamSpec("s3", 0.0, 0.2, False, "N m s/rad")),
+                  {"b0_factor": 0.0 if viscous else 1.0, "s1": 0.076 if viscous else 0.0,
+                   "s2": 0.076 if viscous else 0.0, "s3": 0.076 if viscous else 0.0},
+                  "internal track resistance, a monotone piecewise-linear function of |omega| (knots 3, 12 rad/s): "
+                  "constant / viscous / convex / knee-shaped laws"),
         Candidate("grouser_stiction", (ParamSpec("yaw_moment", 0.5, 30.0, True, "N m"),
                                        ParamSpec("yaw_fade", 0.1, 5.0, True, "rad/s"),
                                        ParamSpec("force", 0.0, 60.0, False, "N")),

@@ -1,24 +1,20 @@
 """``diagnose``: where the simulation disagrees with field logs, which unmodelled effect explains it,
-and how far the gap closes once that effect is added (issue 5; MODEL.md §8).
+and how far the gap closes once that effect is added (MODEL.md §8).
 
 1. **Where** — every test is replayed on the base model; the gap is measured per test × signal ×
    phase (:mod:`.phases`, :mod:`.metrics`) and the cells that carry it are named.
-2. **Which** — each candidate (:mod:`.candidates`: the six effects, the ``recalibrate_base`` control,
-   ``none``) is fitted on calibration tests and scored on held-out tests (:mod:`.fit`: grouped by test,
-   leave-one-test-out). Score = held-out loss × (1 + 0.02 · number of fitted parameters).
-3. **Verdict** — the best-scoring effect is named only if all of these hold, else ``none``:
-   the base model's gap is significant against the noise (some test × signal with MSE > 2σ² and an
-   overall systematic gap ≥ 1 noise unit, :func:`.metrics.overall_gap`); the effect shrinks the held-out gap by ≥ 20 %; it beats
-   ``none`` in ≥ 90 % of the paired block-bootstrap resamples; and it beats ``recalibrate_base`` by
-   ≥ 10 % of held-out loss (else the gap is one that mere tuning closes: verdict ``none`` with that
-   reason). Physical effects carry an encoder layer (:mod:`.fit`); one that does not beat
-   ``sensor_artifacts`` (window + gyro bias alone) by 10 % gives way to it (the simpler explanation). ``confidence`` = the fraction of bootstrap resamples in which the named candidate is still
-   the verdict's winner (for ``none``: in which no effect passes).
-4. **How far** — held-out gap before vs after, overall (with a bootstrap CI) and per cell.
+2. **Which** — each candidate (:mod:`.candidates`: the effects, the ``recalibrate_base`` control,
+   ``none``) is fitted on calibration data and scored on held-out data (:mod:`.fit`: a test whose
+   maneuver repeats is held out whole, a unique one is forward-chained: fitted on its first half, scored
+   on the rest). Fits: derivative-free search, then Levenberg-Marquardt through the simulator (:mod:`.polish`).
+3. **Verdict** — :func:`decide`, from the cached per-sample evidence (:func:`evidence`); see ``RULE_TEXT``.
+4. **How far** — held-out and in-sample gap shrink, each with a block-bootstrap 95 % interval that
+   contains its point estimate; flags (single test, controls dropped, not converged) in the verdict line.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,16 +25,27 @@ from .batch import FIT_SUBSTEP, BatchSimulator
 from .candidates import NONE, RECALIBRATE, candidate_set
 from .data import DiagnosisError, TestData, load_tests
 from .fit import CandidateFit, fit_candidate, make_folds
-from .metrics import (block_indices, bootstrap_shrink, cell_ci, cell_table, gap_carriers, overall_gap,
-                      overall_gap_range, overall_nrmse, signal_weight, sq_errors)
+from .metrics import (cell_ci, cell_table, gap_carriers, overall_gap, overall_gap_range, overall_nrmse,
+                      signal_weight, sq_errors)
+from .stats import ALPHA, block_draws, block_length, centred_interval, dm_test, gap_test, noise_ar1
 
 COMPLEXITY = 0.02
-MIN_SHRINK = 0.20
-MIN_GAP = 1.0  # noise units (metrics.overall_gap)
-MIN_NOISE_RATIO = 2.0
-MARGIN = 0.10
+MIN_SHRINK = 0.10
 SENSOR = "sensor_artifacts"
-P_BEATS_NONE = 0.9
+N_BOOT = 300
+
+RULE_TEXT = (
+    "An effect is named only if all of these hold (alpha = 0.05, Bonferroni over the m effect candidates "
+    "fitted): (1) the base model's gap is real: the AR(1)-noise chi-square test of its residuals, "
+    "Bonferroni-combined over test x signal, has p < alpha; (2) the effect with the lowest held-out loss "
+    "beats `none` on the held-out samples by a Diebold-Mariano test (Newey-West variance, bandwidth >= 2 "
+    "correlation times) with p < alpha/m; (3) it beats the `recalibrate_base` control the same way "
+    "(p < alpha/m), else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does "
+    "not beat `sensor_artifacts` (p < alpha/m) gives way to it if `sensor_artifacts` itself passes (2)-(3); "
+    "(5) its held-out gap shrink is at least 10%. Otherwise `none`, with the reason. Confidence: "
+    "1 - m * (largest p-value the named effect had to pass), for `none` the smallest such value of any "
+    "effect (capped at 1), times 0.7 for a single test, 0.5 when a control was not fitted, 0.8 when the "
+    "fit did not converge.")
 
 
 @dataclass
@@ -51,6 +58,7 @@ class Diagnosis:
     report: dict
     out_dir: Path | None = None
     files: dict = field(default_factory=dict)
+    evidence: dict | None = None
 
     @property
     def verdict(self) -> dict:
@@ -71,33 +79,197 @@ def _scores(fits: dict) -> dict:
     return {n: float(np.sum(f.heldout_loss)) * (1.0 + COMPLEXITY * f.candidate.n_params) for n, f in fits.items()}
 
 
-def _decide(tests, fits: dict, ws: dict, idx=None, which=None) -> tuple[str, str, str]:
-    """(verdict effect, best candidate, reason) from per-sample loss terms ``ws`` (optionally resampled)."""
-    def total(name):
-        if idx is None:
-            return float(sum(np.nanmean(x) for x in ws[name]))
-        return float(sum(np.nanmean(ws[name][j][ii]) for j, ii in zip(which, idx)))
+def _masked(sq: list[dict], masks: list) -> list[dict]:
+    return [{s: np.where(m, e2, np.nan) for s, e2 in d.items()} for d, m in zip(sq, masks)]
 
-    sc = {n: total(n) * (1.0 + COMPLEXITY * f.candidate.n_params) for n, f in fits.items()}
-    best = min(sc, key=sc.get)
-    physical = [n for n in sc if fits[n].candidate.is_effect and n != SENSOR]
-    pool = physical + ([SENSOR] if SENSOR in sc else [])
-    if not pool:
-        return NONE, best, "no applicable effect"
-    e = min(physical, key=sc.get) if physical else SENSOR
-    if SENSOR in sc and e != SENSOR and sc[SENSOR] < sc[NONE] and sc[e] > (1.0 - MARGIN) * sc[SENSOR]:
-        e = SENSOR  # the instruments alone do (nearly) as well: the simpler explanation
-    if sc[e] >= sc[NONE]:
-        return NONE, best, f"no effect improves the held-out fit (best effect {e})"
-    if RECALIBRATE in sc and sc[e] > (1.0 - MARGIN) * sc[RECALIBRATE]:
-        return NONE, RECALIBRATE if sc[RECALIBRATE] <= sc[e] else e, (
-            f"recalibrating the base parameters does as well as the best effect ({e}): a gap that tuning closes")
-    return e, e, "best held-out score"
+
+def evidence(data: list[TestData], fits: dict) -> dict:
+    """What the verdict rule needs, per candidate and per sample (JSON/npz-cacheable: see :func:`save_evidence`)."""
+    masks = fits[NONE].heldout_masks  # every candidate has the same folds, hence the same masks
+    for f in fits.values():
+        masks = [m & mm for m, mm in zip(masks, f.heldout_masks)]
+    sq_base = sq_errors(data, fits[NONE].full_pred)
+    sq_base_held = _masked(sq_base, masks)
+    gap_before = overall_gap(data, sq_base)
+    gap_before_held = overall_gap(data, sq_base_held)
+    # is the base model's gap real: AR(1)-noise chi-square test per test x signal
+    cells = []
+    for j, t in enumerate(data):
+        for sig, e2 in sq_base[j].items():
+            sigma, rho = noise_ar1(t.measured[sig])
+            e = np.sqrt(e2[np.isfinite(e2)])
+            z, p = gap_test(e, sigma, rho)
+            cells.append({"test": t.name, "signal": sig, "z": z, "p": p, "rho": rho})
+    ev = {"tests": [t.name for t in data], "n_tests": len(data), "gap_cells_tested": len(cells),
+          "gap_p": min(1.0, min(c["p"] for c in cells) * len(cells)) if cells else 1.0,
+          "gap_z_max": max((c["z"] for c in cells), default=0.0), "gap_cells": cells,
+          "gap_before": gap_before, "gap_before_heldout": gap_before_held, "candidates": {},
+          "ws_held": {}, "ws_full": {}, "_sq_base": sq_base, "_sq_base_held": sq_base_held,
+          "_sq_held": {}, "_sq_full": {}}
+    for n, f in fits.items():
+        sq_h = _masked(sq_errors(data, f.heldout_pred), masks)
+        sq_f = sq_errors(data, f.full_pred)
+        ev["_sq_held"][n], ev["_sq_full"][n] = sq_h, sq_f
+        ev["ws_held"][n] = _weighted_sq(data, sq_h)
+        ev["ws_full"][n] = _weighted_sq(data, sq_f)
+        gh, gf = overall_gap(data, sq_h), overall_gap(data, sq_f)
+        ev["candidates"][n] = {
+            "n_params": f.candidate.n_params, "is_effect": f.candidate.is_effect, "converged": f.converged,
+            "heldout_gap": gh, "insample_gap": gf,
+            "heldout_shrink": (1.0 - gh / gap_before_held) if gap_before_held > 0 else 0.0,
+            "insample_shrink": (1.0 - gf / gap_before) if gap_before > 0 else 0.0,
+            "heldout_loss": float(sum(np.nanmean(x) for x in ev["ws_held"][n])),
+        }
+    for n in fits:
+        d = dm_test(ev["ws_held"][n], ev["ws_held"][NONE]) if n != NONE else {"z": 0.0, "p": 1.0}
+        ev["candidates"][n]["p_beats_none"], ev["candidates"][n]["z_beats_none"] = d["p"], d["z"]
+    return ev
+
+
+def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> dict:
+    """The verdict rule (``RULE_TEXT``) on evidence from :func:`evidence` (or :func:`load_evidence`)."""
+    cand = ev["candidates"]
+    ws = ev["ws_held"]
+    score = {n: c["heldout_loss"] * (1.0 + COMPLEXITY * c["n_params"]) for n, c in cand.items()}
+    best = min(score, key=score.get)
+    effects = [n for n, c in cand.items() if c["is_effect"]]
+    m = max(len(effects), 1)
+    a = alpha / m
+    tests = {}
+
+    def p_of(x, y):
+        key = f"{x} vs {y}"
+        if key not in tests:
+            tests[key] = dm_test(ws[x], ws[y])["p"] if y in ws else None
+        return tests[key]
+
+    out = {"best": best, "m": m, "gap_p": ev["gap_p"], "gap_significant": ev["gap_p"] < alpha, "tests": tests}
+
+    def passes(e):
+        """(passes (2)-(3), the largest p it had to pass, why not)."""
+        pn = p_of(e, NONE)
+        if pn >= a:
+            return False, pn, f"{e} does not beat the base model on held-out data (Diebold-Mariano p = {pn:.2g} ≥ {a:.2g})"
+        pr = p_of(e, RECALIBRATE) if RECALIBRATE in ws else None
+        if pr is not None and pr >= a:
+            return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ {a:.2g}): "
+                                        "a gap that tuning closes")
+        return True, max(pn, pr if pr is not None else 0.0), ""
+
+    if not effects:
+        return {**out, "effect": NONE, "reason": "no applicable effect", "confidence": 1.0, "p_used": None}
+    if not out["gap_significant"]:
+        return {**out, "effect": NONE, "confidence": min(1.0, ev["gap_p"]),
+                "reason": f"the base model's gap is within the noise (AR(1) chi-square test, p = {ev['gap_p']:.2g})",
+                "p_used": ev["gap_p"]}
+    physical = [n for n in effects if n != SENSOR]
+    e = min(physical, key=score.get) if physical else SENSOR
+    ok, p_used, why = passes(e)
+    if SENSOR in ws and e != SENSOR:
+        ps = p_of(e, SENSOR)
+        if ps >= a:
+            ok_s, p_s, why_s = passes(SENSOR)
+            if ok_s:
+                e, ok, p_used, why = SENSOR, True, p_s, ""
+            elif ok:
+                ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; p = {ps:.2g}"
+                                              f" ≥ {a:.2g})")
+        else:
+            p_used = max(p_used, ps)
+    if not ok and SENSOR in ws and e != SENSOR:
+        ok_s, p_s, _ = passes(SENSOR)
+        if ok_s and score[SENSOR] < score[NONE]:
+            e, ok, p_used, why = SENSOR, True, p_s, ""
+    if ok and cand[e]["heldout_shrink"] < min_shrink:
+        ok, why = False, f"{e} closes only {100 * cand[e]['heldout_shrink']:.0f}% of the held-out gap (< {100 * min_shrink:.0f}%)"
+    if ok:
+        return {**out, "effect": e, "reason": "passes the tests of the rule", "confidence": max(0.0, 1.0 - m * p_used),
+                "p_used": p_used}
+    # none: confidence = how far the strongest effect was from passing
+    p_min = min((max(p_of(x, NONE), p_of(x, RECALIBRATE) or 0.0) for x in effects), default=1.0)
+    return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, m * p_min), "p_used": p_min}
+
+
+def analysis_flags(data, fits, fits_applicable, chosen, restricted) -> list[str]:
+    """What limits the analysis (stated in the verdict line and report.json)."""
+    flags = []
+    if len(data) == 1:
+        flags.append("single test: held out = the later half of the same test")
+    missing = [c for c in (RECALIBRATE, SENSOR) if c not in fits]
+    if missing:
+        flags.append("controls not fitted: " + ", ".join(missing) + (" (dropped by the candidate list)" if restricted
+                                                                     else " (not applicable)"))
+    if not fits[chosen].converged:
+        flags.append(f"fit of {chosen} not converged")
+    return flags
+
+
+def flag_penalty(flags: list[str]) -> float:
+    k = 1.0
+    for f in flags:
+        k *= 0.7 if f.startswith("single") else 0.5 if f.startswith("controls") else 0.8
+    return k
+
+
+def shrink_interval(data, sq_before, sq_after, point, seed=0, n_boot=N_BOOT) -> tuple[float, float]:
+    """95 % interval of a gap shrink: block bootstrap (blocks = correlation time), recentred on ``point``."""
+    rng = np.random.default_rng(seed)
+    blocks, lengths = [], []
+    for j, t in enumerate(data):
+        dt = float(np.median(np.diff(t.t)))
+        st = np.stack(list(sq_before[j].values()))
+        x = np.nansum(st, axis=0) / np.maximum(np.sum(np.isfinite(st), axis=0), 1)
+        blocks.append(block_length(x[np.any(np.isfinite(st), axis=0)], dt))
+        lengths.append(len(t.t))
+    vals = []
+    for which, idx in block_draws(lengths, blocks, rng, n_boot):
+        tb = [data[j] for j in which]
+        gb = overall_gap(tb, [sq_before[j] for j in which], idx)
+        ga = overall_gap(tb, [sq_after[j] for j in which], idx)
+        if gb > 0:
+            vals.append(1.0 - ga / gb)
+    return centred_interval(point, np.array(vals))
+
+
+def verdict_line(effect, confidence, shrink, ci, ins, ins_ci, reason, flags) -> str:
+    fl = f" [{'; '.join(flags)}]" if flags else ""
+    if effect == NONE:
+        return f"none (confidence {confidence:.2f}): {reason}{fl}"
+    return (f"{effect} (confidence {confidence:.2f}): held-out gap shrink {100 * shrink:.0f}% (95% CI {100 * ci[0]:.0f}"
+            f"-{100 * ci[1]:.0f}%), in-sample {100 * ins:.0f}% (95% CI {100 * ins_ci[0]:.0f}-{100 * ins_ci[1]:.0f}%){fl}")
+
+
+def save_evidence(ev: dict, path: Path) -> None:
+    """Cache the evidence (per-sample losses as npz, the rest as JSON) so that :func:`decide` re-runs in ms."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    arrs = {}
+    for kind in ("ws_held", "ws_full"):
+        for n, lst in ev[kind].items():
+            for j, x in enumerate(lst):
+                arrs[f"{kind}|{n}|{j}"] = x
+    np.savez_compressed(path / "evidence.npz", **arrs)
+    meta = {k: v for k, v in ev.items() if not k.startswith("_") and k not in ("ws_held", "ws_full")}
+    (path / "evidence.json").write_text(json.dumps(_clean(meta), indent=1) + "\n")
+
+
+def load_evidence(path: Path) -> dict:
+    path = Path(path)
+    ev = json.loads((path / "evidence.json").read_text())
+    ev["ws_held"], ev["ws_full"] = {}, {}
+    with np.load(path / "evidence.npz") as z:
+        for key in z.files:
+            kind, n, j = key.split("|")
+            ev[kind].setdefault(n, {})[int(j)] = z[key]
+    for kind in ("ws_held", "ws_full"):
+        ev[kind] = {n: [d[j] for j in sorted(d)] for n, d in ev[kind].items()}
+    return ev
 
 
 def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: list[str] | None = None,
              internal_resistance: str = "constant", candidates: list[str] | None = None, substep: float = FIT_SUBSTEP,
-             seed: int = 0, rounds: int = 3, figures: bool = True, progress: bool = True) -> Diagnosis:
+             seed: int = 0, rounds: int = 3, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
+             progress: bool = True, pad_s: float | None = None, cache: str | Path | None = None) -> Diagnosis:
     """Diagnose the gap between the simulator and the field tests in ``folder`` (one sub-folder per test).
 
     Args:
@@ -123,7 +295,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         if unknown:
             raise DiagnosisError(f"unknown candidate(s) {', '.join(unknown)}; known: {', '.join(names)}")
         all_cands = [c for c in all_cands if c.name in candidates or c.name == NONE]
-    sim = BatchSimulator(data, internal_resistance, substep)
+    sim = BatchSimulator(data, internal_resistance, substep, pad_s=pad_s)
     deformable = [float(b.terrain.deformable) > 0.5 for b in sim.base]
     skipped = {}
     cands = []
@@ -133,7 +305,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             skipped[c.name] = why
         else:
             cands.append(c)
-    folds = make_folds(len(data))
+    folds = make_folds(data)
     # progress: vehicle-simulations done out of the planned total
     from tqdm.auto import tqdm
 
@@ -144,7 +316,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         else:
             F = len(folds) + 1
             m = max(3, int(np.ceil(16 / F)))
-            planned += len(data) * F * m * (1 + rounds)
+            planned += len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters)
     bar = tqdm(total=planned, desc="diagnose", unit="sim", disable=not progress, leave=False)
     fits: dict[str, CandidateFit] = {}
     order = [c for c in cands if c.name == NONE] + [c for c in cands if c.name != NONE]
@@ -152,74 +324,54 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     for c in order:
         bar.set_postfix_str(c.name)
         t0 = time.perf_counter()
-        fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, progress=bar.update)
+        fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, polish_iters=polish_iters,
+                                     progress=bar.update)
         t_fit[c.name] = time.perf_counter() - t0
     bar.close()
 
     base = fits[NONE]
-    sq_held = {n: sq_errors(data, f.heldout_pred) for n, f in fits.items()}
-    sq_full = {n: sq_errors(data, f.full_pred) for n, f in fits.items()}
-    sq_base = sq_full[NONE]
-    ws = {n: _weighted_sq(data, sq) for n, sq in sq_held.items()}
-    sc = _scores(fits)
-    gap_before = overall_gap(data, sq_base)
-    noise_ratio_max = max(float(np.nanmean(sq_base[j][s]) / t.noise[s] ** 2) for j, t in enumerate(data)
-                          for s in t.measured)
-    significant = bool(gap_before >= MIN_GAP and noise_ratio_max >= MIN_NOISE_RATIO)
+    ev = evidence(data, fits)
+    rule = decide(ev, alpha=alpha)
+    effect, best, reason = rule["effect"], rule["best"], rule["reason"]
+    sq_base = ev["_sq_base"]
+    gap_before = ev["gap_before"]
     ranking = []
+    sc = _scores(fits)
     for n, f in fits.items():
-        sq = sq_held[n]
-        g = overall_gap(data, sq)
+        rk = ev["candidates"][n]
         ranking.append({
             "effect": n, "description": f.candidate.description, "n_params": f.candidate.n_params,
-            "heldout_nrmse": overall_nrmse(data, sq), "heldout_gap": g,
-            "heldout_gap_range": overall_gap_range(data, sq),
-            "insample_gap": overall_gap(data, sq_full[n]),
-            "heldout_gap_shrink": (1.0 - g / gap_before) if gap_before > 0 else 0.0,
+            "heldout_nrmse": overall_nrmse(data, ev["_sq_held"][n]), "heldout_gap": rk["heldout_gap"],
+            "heldout_gap_range": overall_gap_range(data, ev["_sq_held"][n]),
+            "insample_gap": rk["insample_gap"],
+            "heldout_gap_shrink": rk["heldout_shrink"], "insample_gap_shrink": rk["insample_shrink"],
+            "p_beats_none": rk["p_beats_none"], "z_beats_none": rk["z_beats_none"],
             "heldout_loss": float(np.sum(f.heldout_loss)), "score": sc[n],
             "params": f.full.params, "fold_params": [fd.params for fd in f.folds],
             "heldout_loss_per_test": {data[j].name: float(x) for j, x in enumerate(f.heldout_loss)},
             "insample_loss_per_test": {data[j].name: float(x) for j, x in enumerate(f.full_loss)},
-            "converged": f.converged, "simulations": f.n_simulations, "fit_time_s": t_fit[n], "notes": f.notes,
+            "converged": f.converged,
+            "polish": {"full": f.full.polish, "folds": [fd.polish for fd in f.folds]},
+            "simulations": f.n_simulations, "fit_time_s": t_fit[n], "notes": f.notes,
         })
     ranking.sort(key=lambda r: r["score"])
-    shrink_of = {r["effect"]: r["heldout_gap_shrink"] for r in ranking}
-
-    def verdict_of(idx=None, which=None):
-        eff, best, reason = _decide(data, fits, ws, idx, which)
-        if eff != NONE and not significant:
-            return NONE, best, "the base model's gap is within the noise"
-        if eff != NONE and shrink_of[eff] < MIN_SHRINK:
-            return NONE, best, f"the best effect ({eff}) closes only {100 * shrink_of[eff]:.0f}% of the held-out gap"
-        return eff, best, reason
-
-    effect, best, reason = verdict_of()
-    if not significant:
-        reason = (f"the base model's gap is within the noise (systematic gap {gap_before:.2f} noise units, "
-                  f"largest MSE/σ² {noise_ratio_max:.2f})")
-    # bootstrap: paired over tests and blocks
-    rng = np.random.default_rng(seed + 7)
-    agree, beats_none = 0, 0
-    n_boot = 200
-    for _ in range(n_boot):
-        which, idx = block_indices(data, rng)
-        e_b, _, _ = verdict_of(idx, which)
-        agree += e_b == effect
-        if effect != NONE:
-            tot = lambda n: sum(np.nanmean(ws[n][j][ii]) for j, ii in zip(which, idx))  # noqa: E731
-            beats_none += tot(effect) < tot(NONE)
-    p_beats = beats_none / n_boot if effect != NONE else None
-    if effect != NONE and p_beats < P_BEATS_NONE:
-        reason = f"{effect} beats the base model in only {100 * p_beats:.0f}% of bootstrap resamples"
-        effect = NONE
-    confidence = agree / n_boot
-    chosen = fits[effect] if effect != NONE else fits[best]
-    sq_after = sq_held[chosen.candidate.name]
+    chosen_name = effect if effect != NONE else best
+    chosen = fits[chosen_name]
+    sq_after = ev["_sq_held"][chosen_name]
+    held_base = ev["_sq_base_held"]
+    gap_before_held = overall_gap(data, held_base)
     gap_after = overall_gap(data, sq_after)
-    shrink = (1.0 - gap_after / gap_before) if gap_before > 0 else 0.0
-    shrink_ci = bootstrap_shrink(data, sq_base, sq_after, seed=seed)
+    shrink = ev["candidates"][chosen_name]["heldout_shrink"]
+    ins = ev["candidates"][chosen_name]["insample_shrink"]
+    shrink_ci = shrink_interval(data, held_base, sq_after, shrink, seed=seed)
+    ins_ci = shrink_interval(data, sq_base, ev["_sq_full"][chosen_name], ins, seed=seed + 1)
+    flags = analysis_flags(data, fits, fits_applicable=[c.name for c in cands], chosen=chosen_name,
+                           restricted=bool(candidates))
+    confidence = rule["confidence"] * flag_penalty(flags)
+    line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags)
     rows = cell_table(data, base.full_pred, chosen.heldout_pred)
     cell_ci(data, rows, sq_base, sq_after, seed=seed)
+    significant = rule["gap_significant"]
     carriers = gap_carriers(rows) if significant else []
     synthetic = [t.name for t in data if t.log.synthetic]
     report = {
@@ -228,16 +380,20 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         if synthetic else "field logs (meta.json does not say synthetic)",
         "base_model": {"internal_resistance": internal_resistance, "substep_s": substep},
         "verdict": {
-            "effect": effect, "confidence": confidence, "heldout_gap_shrink": shrink if effect != NONE else 0.0,
+            "effect": effect, "confidence": confidence, "verdict_line": line, "flags": flags,
+            "heldout_gap_shrink": shrink if effect != NONE else 0.0,
             "heldout_gap_shrink_ci": list(shrink_ci) if effect != NONE else None,
+            "insample_gap_shrink": ins, "insample_gap_shrink_ci": list(ins_ci),
             "best_candidate": best, "reason": reason, "gap_significant": significant,
-            "gap_before": gap_before, "gap_after": gap_after if effect != NONE else gap_before,
+            "gap_test": {"p": rule["gap_p"], "z_max": ev["gap_z_max"], "cells": ev["gap_cells_tested"]},
+            "tests_used": rule["tests"],
+            "gap_before": gap_before, "gap_before_heldout": gap_before_held,
+            "gap_after": gap_after if effect != NONE else gap_before_held,
             "gap_before_range": overall_gap_range(data, sq_base), "gap_after_range": overall_gap_range(data, sq_after),
             "gap_unit": "noise units: sqrt(mean over tests of mean over signals of (MSE - sigma^2)+ / (sigma^2 + (0.01 span)^2))",
-            "p_beats_none": p_beats, "after_model": chosen.candidate.name,
-            "insample_gap_shrink": (1.0 - overall_gap(data, sq_full[chosen.candidate.name]) / gap_before)
-            if gap_before > 0 else 0.0,
+            "p_beats_none": ev["candidates"][chosen_name]["p_beats_none"], "after_model": chosen_name,
             "best_candidate_shrink": shrink, "best_candidate_shrink_ci": list(shrink_ci),
+            "converged": chosen.converged,
         },
         "ranking": ranking,
         "not_applicable": [{"effect": k, "why": v} for k, v in skipped.items()],
@@ -250,20 +406,24 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
                    "phases": _spans(t), "notes": t.notes} for t in data],
         "excluded": excluded,
         "method": {
-            "folds": [{"calibration": [data[i].name for i in c], "heldout": [data[i].name for i in h]}
-                      for c, h in folds] or "single test: scored in-sample (nothing to hold out)",
+            "folds": [{"kind": fd.kind, "calibration": [data[i].name for i in fd.calibration],
+                       "heldout": data[fd.held].name + (" (tail)" if fd.kind == "forward" else "")} for fd in folds],
             "loss": "per test: mean over signals of mean((sim-meas)^2)/(sigma^2 + (0.01 span)^2); summed over tests",
-            "score": f"held-out loss x (1 + {COMPLEXITY} x fitted parameters)",
+            "score": f"held-out loss x (1 + {COMPLEXITY} x fitted parameters) (ranking only; the verdict uses the tests)",
             "gap": "noise units: sqrt(mean over tests of mean over signals of max(MSE - sigma^2, 0)/(sigma^2 + (0.01 span)^2)); "
                    "gap_range: sqrt(mean over test x signal of max(MSE - sigma^2, 0)/span^2) (systematic NRMSE)",
-            "thresholds": {"min_gap": MIN_GAP, "min_noise_ratio": MIN_NOISE_RATIO, "min_shrink": MIN_SHRINK,
-                           "margin": MARGIN, "p_beats_none": P_BEATS_NONE},
-            "search": f"Latin hypercube + {rounds} cross-entropy rounds per fold; seed {seed}",
+            "rule": RULE_TEXT,
+            "thresholds": {"alpha": alpha, "bonferroni_m": rule["m"], "min_shrink": MIN_SHRINK},
+            "search": f"Latin hypercube + {rounds} cross-entropy rounds per fold, then Levenberg-Marquardt "
+                      f"({polish_iters} iterations at most, jax.jacfwd Jacobian); seed {seed}",
         },
         "timing": {"wall_s": time.perf_counter() - t_start, "fit_s": t_fit,
                    "vehicle_seconds_simulated": sim.n_vehicle_seconds},
     }
     diag = Diagnosis(data, excluded, fits, report)
+    diag.evidence = ev
+    if cache is not None:
+        save_evidence(ev, Path(cache))
     if out_dir is not None:
         from .report import write_report
 

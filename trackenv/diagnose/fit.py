@@ -1,4 +1,4 @@
-"""Fit a candidate's parameters on calibration tests and predict the held-out ones.
+"""Fit a candidate's parameters on calibration data and predict the held-out data.
 
 **Loss** of a prediction on one test: the mean over its measured signals of
 
@@ -7,26 +7,36 @@
 with σ the signal's noise level and span its robust range (:mod:`.data`): a χ² per sample that
 gives each signal equal say, with a 1 %-of-range floor for what a model can be expected to match
 (so that the quietest channel does not dominate). The loss of a set of tests is the sum over tests
-(each test counts once, whatever its length).
+(each test counts once, whatever its length). Each test is cut at the middle of its compared samples
+into a *head* and a *tail*; a loss is kept per part (the whole test's loss is their sample-weighted
+sum).
 
-**Folds**: grouped by test, never by sample — leave-one-test-out for up to ``MAX_FOLDS`` tests,
-else that many groups of whole tests — plus the *full* fit on every test (the parameters reported).
+**Folds** (:func:`make_folds`, one per test, never a random split of samples):
 
-**Search** (a robust, derivative-free optimizer; the batched simulator makes a population cheap):
-one global round of Latin-hypercube points in the candidate's unit cube, the anchor (≈ the base
-model) among them, evaluated on every test; then ``rounds`` rounds of the cross-entropy method *per
-fold*: new points drawn around the fold's best point (spread = the spread of its 4 best, shrinking
-0.6× per round) from the fold's *calibration* losses only, evaluated in one batch for all folds.
-Every physical effect (not ``none``, ``recalibrate_base``, or ``sensor_artifacts``, which has its own
-window) also carries an *encoder layer*: each simulated point is scored with the speed averaged over each of
-``ENCODER_WINDOWS`` (free: no new simulation), and the window is selected with the point. Encoder
-averaging is common in field logs and would otherwise be the first thing any effect is fitted to
-explain; with the layer, an effect wins on what the encoder cannot explain, and the verdict
-(:mod:`.core`) names ``sensor_artifacts`` when an effect is no clearly better than the instruments alone.
-A fold's parameters are the best point of its pool (the global points and its own) on its
-calibration tests; its held-out predictions are that point's predictions on the held-out tests.
-Simulations that diverge get an infinite loss; a fold whose best loss is not finite, or that still
-improved by more than 2 % in its last round, is reported as not converged.
+- a test whose maneuver the folder *repeats* (another test with the same ``maneuver`` in
+  ``meta.json``) is held out whole: the fold is fitted on every other test and predicts this one;
+- a test whose maneuver is unique (another test cannot stand in for it) is *forward-chained*: the fold
+  is fitted on every other test plus this test's head, and predicts its tail (the part of the test
+  after the data it was fitted on). An effect that only this test excites is then still measured
+  out of sample, on the later half of the same test.
+
+Plus the *full* fit on all the data (the parameters reported, and the in-sample numbers).
+
+**Search** — stage 1, derivative-free (multimodal fits): one global round of Latin-hypercube points in
+the candidate's unit cube, the anchor (≈ the base model) among them, evaluated on every test; then
+``rounds`` rounds of the cross-entropy method *per fold*: new points drawn around the fold's best point
+(spread = the spread of its 4 best, shrinking 0.6× per round) scored on the fold's *calibration* data
+only, evaluated in one batch for all folds. Every physical effect (not ``none``, ``recalibrate_base``,
+or ``sensor_artifacts``, which has its own window) also carries an *encoder layer*: each simulated point
+is scored with the speed averaged over each of ``ENCODER_WINDOWS`` (free: no new simulation), and the
+window is selected with the point.
+
+Stage 2, gradient polish (:mod:`.polish`): each fold's best point is refined by Levenberg-Marquardt
+on the fold's weighted residuals, with the Jacobian from ``jax.jacfwd`` through the batched simulator
+(all folds in one call per iteration) and the bounds kept by a logistic map of the unit cube. Each fold
+reports its gradient norm and last relative improvement; a fold is *converged* if the polish stopped on
+a small step, gradient or improvement (not on the iteration limit), or — where no gradient could be
+used — if the search's last round improved it by at most 2 %.
 """
 
 from __future__ import annotations
@@ -42,28 +52,90 @@ from .candidates import Candidate
 from .data import TestData
 from .metrics import MODEL_FLOOR, signal_error, signal_weight  # noqa: F401  (MODEL_FLOOR: the loss's floor)
 
-MAX_FOLDS = 6
+MAX_FOLDS = 12
 ENCODER_WINDOWS = (0.0, 0.05, 0.1, 0.2, 0.35)  # s, the encoder layer every candidate but none carries
+HEAD_FRACTION = 0.5  # forward chaining: the head is this fraction of a test's compared samples
 
 
-def test_loss(test: TestData, pred: dict) -> np.ndarray:
-    """Loss of predictions ``pred[sig]`` (K, S) on one test -> (S,)."""
-    terms = []
-    for sig, meas in test.measured.items():
-        ok = np.isfinite(meas) & test.fit_mask
-        err = signal_error(test, sig, pred[sig])[ok]
-        terms.append(np.mean(err**2, axis=0) * signal_weight(test, sig))
-    out = np.mean(terms, axis=0)
+def split_parts(test: TestData) -> np.ndarray:
+    """(K,) 0 for the head, 1 for the tail of ``test`` (cut at ``HEAD_FRACTION`` of its compared samples)."""
+    idx = np.flatnonzero(test.fit_mask)
+    part = np.ones(len(test.t), np.int8)
+    if idx.size:
+        part[: idx[int(HEAD_FRACTION * (idx.size - 1))] + 1] = 0
+    return part
+
+
+def test_loss_parts(test: TestData, pred: dict, part: np.ndarray | None = None) -> np.ndarray:
+    """Loss of predictions ``pred[sig]`` (K, S) on one test, per part -> (2, S) (head, tail)."""
+    part = split_parts(test) if part is None else part
+    out = []
+    for q in (0, 1):
+        terms = []
+        for sig, meas in test.measured.items():
+            ok = np.isfinite(meas) & test.fit_mask & (part == q)
+            if ok.sum() == 0:
+                continue
+            err = signal_error(test, sig, pred[sig])[ok]
+            terms.append(np.mean(err**2, axis=0) * signal_weight(test, sig))
+        out.append(np.mean(terms, axis=0) if terms else np.zeros(np.shape(next(iter(pred.values())))[1:]))
+    out = np.stack(out)
     return np.where(np.isfinite(out), out, np.inf)
 
 
-def make_folds(n_tests: int, max_folds: int = MAX_FOLDS) -> list[tuple[tuple, tuple]]:
-    """[(calibration tests, held-out tests)]: leave-one-test-out, or contiguous groups of tests."""
-    if n_tests < 2:
-        return []
-    k = min(n_tests, max_folds)
-    groups = np.array_split(np.arange(n_tests), k)
-    return [(tuple(int(i) for i in range(n_tests) if i not in g), tuple(int(i) for i in g)) for g in groups]
+def part_fractions(test: TestData, part: np.ndarray | None = None) -> np.ndarray:
+    part = split_parts(test) if part is None else part
+    n = np.array([np.sum(test.fit_mask & (part == q)) for q in (0, 1)], np.float64)
+    return n / max(n.sum(), 1.0)
+
+
+def test_loss(test: TestData, pred: dict) -> np.ndarray:
+    """Loss of predictions ``pred[sig]`` (K, S) on the whole test -> (S,)."""
+    lp = test_loss_parts(test, pred)
+    fr = part_fractions(test)
+    return fr[0] * lp[0] + fr[1] * lp[1]
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One fold: ``held`` test index, ``kind`` ("test": held out whole, "forward": head fitted, tail predicted),
+    ``weights`` (n_tests, 2) on the (head, tail) part losses that make the calibration loss."""
+
+    held: int
+    kind: str
+    weights: np.ndarray
+
+    @property
+    def calibration(self) -> tuple:
+        return tuple(int(j) for j in np.flatnonzero(self.weights.sum(axis=1) > 0))
+
+
+def make_folds(tests: list[TestData]) -> list[Fold]:
+    """One fold per test: held out whole where its maneuver repeats in the folder, else forward-chained."""
+    n = len(tests)
+    fr = np.stack([part_fractions(t) for t in tests])
+    mans = [str(t.log.maneuver or t.name) for t in tests]
+    folds = []
+    for j in range(n):
+        w = fr.copy()
+        if n >= 2 and mans.count(mans[j]) >= 2:
+            w[j] = 0.0
+            folds.append(Fold(j, "test", w))
+        else:
+            w[j] = (1.0, 0.0)
+            folds.append(Fold(j, "forward", w))
+    return folds
+
+
+def full_fold(tests: list[TestData]) -> Fold:
+    return Fold(-1, "full", np.stack([part_fractions(t) for t in tests]))
+
+
+def heldout_mask(test: TestData, fold: Fold) -> np.ndarray:
+    """(K,) the samples of ``test`` that ``fold`` predicts out of sample."""
+    if fold.kind == "forward":
+        return test.fit_mask & (split_parts(test) == 1)
+    return test.fit_mask.copy()
 
 
 @dataclass
@@ -74,19 +146,23 @@ class FoldFit:
     params: dict  # physical
     calibration_loss: float
     converged: bool
+    kind: str = "test"
+    search_loss: float = float("nan")  # the calibration loss of the search's best point (before the polish)
+    polish: dict = field(default_factory=dict)  # iterations, grad_norm, last_rel_improvement, stop reason
 
 
 @dataclass
 class CandidateFit:
     candidate: Candidate
     full: FoldFit
-    folds: list
-    heldout_pred: list  # per test: {sig: (K,)} predicted by the fold that held it out (full fit if no folds)
+    folds: list  # FoldFit per fold
+    heldout_pred: list  # per test: {sig: (K,)} predicted by the fold that holds it out (full fit if no folds)
     full_pred: list  # per test: {sig: (K,)} of the full fit
-    heldout_loss: np.ndarray  # (n_tests,)
+    heldout_loss: np.ndarray  # (n_tests,) loss on each test's held-out samples
     full_loss: np.ndarray  # (n_tests,)
     n_simulations: int
     diverged_fraction: float
+    heldout_masks: list = field(default_factory=list)  # per test: (K,) samples predicted out of sample
     notes: list = field(default_factory=list)
 
     @property
@@ -95,45 +171,51 @@ class CandidateFit:
 
 
 class _Pool:
-    """Evaluated points: unit coords, per-test losses, per-test predictions."""
+    """Evaluated points: unit coords, per-test part losses (n, 2), per-test predictions."""
 
     def __init__(self, windows=()):
         self.unit, self.loss, self.pred, self.owner, self.window = [], [], [], [], []
         self.windows = tuple(windows) or (None,)
 
     def add(self, unit, loss, pred, owner):
+        """``loss``: (n, 2, C) with C = S · len(windows) columns."""
         nw = len(self.windows)
-        for c in range(loss.shape[1]):
+        for c in range(loss.shape[2]):
             s = c // nw
             self.unit.append(unit[s])
-            self.loss.append(loss[:, c])
+            self.loss.append(loss[:, :, c])
             self.pred.append([{k: v[:, c] for k, v in p.items()} for p in pred])
             self.owner.append(owner[s])
             self.window.append(self.windows[c % nw])
 
-    def select(self, fold: int, calib: tuple):
+    def select(self, fold: int, weights: np.ndarray):
         idx = [i for i, o in enumerate(self.owner) if o in (-1, fold)]
-        score = np.array([np.sum(self.loss[i][list(calib)]) for i in idx])
+        with np.errstate(invalid="ignore"):
+            score = np.array([np.sum(np.where(weights > 0, self.loss[i] * weights, 0.0)) for i in idx])
+        score = np.where(np.isfinite(score), score, np.inf)
         order = np.argsort(score)
         return [idx[o] for o in order], score[order]
 
 
+def _losses(tests, pred):
+    return np.stack([test_loss_parts(tests[j], pred[j]) for j in range(len(tests))])  # (n, 2, C)
+
+
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
-                  min_round: int = 16, rounds: int = 3, progress=None) -> CandidateFit:
+                  min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None) -> CandidateFit:
     tests = sim.tests
     n = len(tests)
-    all_tests = tuple(range(n))
-    fold_defs = list(folds) + [(all_tests, ())]  # last = full fit
+    fold_defs = list(folds) + [full_fold(tests)]  # last = full fit
     F = len(fold_defs)
     windows = ENCODER_WINDOWS if cand.encoder_layer else ()
     pool = _Pool(windows)
     n_sims = 0
     n_div = 0
     p = cand.n_params
+    last_gain = np.zeros(F)
     if p == 0:
         pred, div = sim.run(cand, {}, progress)
-        loss = np.stack([test_loss(tests[j], pred[j]) for j in range(n)])
-        pool.add(np.zeros((1, 0)), loss, pred, [-1])
+        pool.add(np.zeros((1, 0)), _losses(tests, pred), pred, [-1])
         n_sims += n
         n_div += int(div.sum())
         rounds = 0
@@ -143,17 +225,16 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
         sob = qmc.LatinHypercube(d=p, seed=seed).random(S)
         sob[0] = cand.anchor_unit()
         pred, div = sim.run(cand, cand.physical(sob), progress, windows)
-        loss = np.stack([test_loss(tests[j], pred[j]) for j in range(n)])
-        loss[div] = np.inf
+        loss = _losses(tests, pred)
+        loss[np.broadcast_to(div[:, None, :], loss.shape)] = np.inf
         pool.add(sob, loss, pred, [-1] * S)
         n_sims += n * S
         n_div += int(div.sum())
         rng = np.random.default_rng(seed + 1)
-        last_gain = np.zeros(F)
         for r in range(rounds):
             pts, owner, before = [], [], []
-            for f, (calib, _) in enumerate(fold_defs):
-                order, score = pool.select(f, calib)
+            for f, fd in enumerate(fold_defs):
+                order, score = pool.select(f, fd.weights)
                 before.append(score[0])
                 elite = np.stack([pool.unit[i] for i in order[:4]])
                 centre = elite[0]
@@ -163,38 +244,68 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
                 owner += [f] * m
             pts = np.concatenate(pts)
             pred, div = sim.run(cand, cand.physical(pts), progress, windows)
-            loss = np.stack([test_loss(tests[j], pred[j]) for j in range(n)])
-            loss[div] = np.inf
+            loss = _losses(tests, pred)
+            loss[np.broadcast_to(div[:, None, :], loss.shape)] = np.inf
             pool.add(pts, loss, pred, owner)
             n_sims += n * pts.shape[0]
             n_div += int(div.sum())
-            for f, (calib, _) in enumerate(fold_defs):
-                _, score = pool.select(f, calib)
+            for f, fd in enumerate(fold_defs):
+                _, score = pool.select(f, fd.weights)
                 last_gain[f] = (before[f] - score[0]) / max(before[f], 1e-12) if np.isfinite(before[f]) else 1.0
+    # the search's best point per fold
+    best_i = []
+    search_score = []
+    for f, fd in enumerate(fold_defs):
+        order, score = pool.select(f, fd.weights)
+        best_i.append(order[0])
+        search_score.append(float(score[0]))
+    units = [np.asarray(pool.unit[i], np.float64) for i in best_i]
+    wins = [pool.window[i] for i in best_i]
+    preds = [pool.pred[i] for i in best_i]
+    scores = list(search_score)
+    polish_info = [dict() for _ in range(F)]
+    notes = []
+    if p and polish_iters > 0:
+        from .polish import polish_folds
+
+        res = polish_folds(sim, cand, fold_defs, units, wins, scores, iters=polish_iters, progress=progress)
+        n_sims += res["n_simulations"]
+        for f in range(F):
+            polish_info[f] = res["info"][f]
+            if res["improved"][f]:
+                units[f] = res["units"][f]
+                preds[f] = res["preds"][f]
+                scores[f] = res["scores"][f]
+        notes += res["notes"]
     fits, heldout_pred, heldout_loss = [], [None] * n, np.full(n, np.inf)
-    full_fit = None
-    for f, (calib, held) in enumerate(fold_defs):
-        order, score = pool.select(f, calib)
-        best = order[0]
-        conv = bool(np.isfinite(score[0]) and (rounds == 0 or last_gain[f] <= 0.02))
-        unit = pool.unit[best]
+    masks = [t.fit_mask.copy() for t in tests]
+    full_fit = full_pred = full_loss = None
+    for f, fd in enumerate(fold_defs):
+        info = polish_info[f]
+        if info.get("used_gradient"):
+            conv = bool(np.isfinite(scores[f]) and info.get("stop") in ("small step", "small gradient",
+                                                                         "small improvement"))
+        else:
+            conv = bool(np.isfinite(scores[f]) and (rounds == 0 or last_gain[f] <= 0.02))
+        unit = units[f]
         params = {k: float(v[0]) for k, v in cand.physical(unit[None]).items()} if p else {}
-        if pool.window[best] is not None:
-            params["encoder_window"] = float(pool.window[best])
-        ff = FoldFit(calib, held, unit, params, float(score[0]), conv)
-        if f == F - 1:
+        if wins[f] is not None:
+            params["encoder_window"] = float(wins[f])
+        lp = np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
+                       for j in range(n)])  # (n, 2)
+        held = () if fd.kind == "full" else (fd.held,)
+        ff = FoldFit(fd.calibration, held, unit, params, float(scores[f]), conv, fd.kind, search_score[f], info)
+        if fd.kind == "full":
             full_fit = ff
-            full_pred = pool.pred[best]
-            full_loss = pool.loss[best]
+            full_pred = preds[f]
+            full_loss = np.sum(lp * fd.weights, axis=1)
         else:
             fits.append(ff)
-            for j in held:
-                heldout_pred[j] = pool.pred[best][j]
-                heldout_loss[j] = pool.loss[best][j]
-    if not folds:  # a single test: nothing to hold out; scored in-sample (stated in the report)
-        heldout_pred, heldout_loss = list(full_pred), np.array(full_loss)
-    notes = []
+            j = fd.held
+            heldout_pred[j] = preds[f][j]
+            heldout_loss[j] = lp[j, 1] if fd.kind == "forward" else float(np.sum(lp[j] * part_fractions(tests[j])))
+            masks[j] = heldout_mask(tests[j], fd)
     if n_div:
         notes.append(f"{n_div} of {n_sims} simulations diverged (excluded from the fit)")
     return CandidateFit(cand, full_fit, fits, heldout_pred, list(full_pred), heldout_loss, np.array(full_loss),
-                        n_sims, n_div / max(n_sims, 1), notes)
+                        n_sims, n_div / max(n_sims, 1), masks, notes)

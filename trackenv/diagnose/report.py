@@ -128,17 +128,10 @@ def write_report(diag, out: Path, figures: bool = True) -> dict:
          f"Base model: {rep['base_model']['internal_resistance']} internal resistance; fits at a "
          f"{1e3 * rep['base_model']['substep_s']:g} ms substep. Wall time {rep['timing']['wall_s']:.0f} s.", "",
          "## Verdict", ""]
-    if v["effect"] != "none":
-        lo, hi = v["heldout_gap_shrink_ci"]
-        L += [f"**`{v['effect']}`** (confidence {v['confidence']:.2f}): adding it shrinks the held-out gap by "
-              f"**{100 * v['heldout_gap_shrink']:.0f}%** (95% CI {100 * lo:.0f}-{100 * hi:.0f}%), from "
-              f"{v['gap_before']:.2f} to {v['gap_after']:.2f} noise units (systematic NRMSE "
-              f"{_pct(v['gap_before_range'])} → {_pct(v['gap_after_range'])} of range); it beats the base model in "
-              f"{100 * v['p_beats_none']:.0f}% of bootstrap resamples. Fitted on all tests (in-sample) it closes "
-              f"{100 * v['insample_gap_shrink']:.0f}% of the gap."]
-    else:
-        L += [f"**`none`** (confidence {v['confidence']:.2f}): {v['reason']}. Best candidate: `{v['best_candidate']}` "
-              f"(held-out gap {v['gap_before']:.2f} → {v['gap_after']:.2f} noise units)."]
+    L += [f"**{v['verdict_line']}**", "",
+          f"Base-model gap {v['gap_before']:.2f} noise units (held-out samples: {v['gap_before_heldout']:.2f}); "
+          f"after `{v['after_model']}` (held out): {v['gap_after']:.2f}. Gap test p = {v['gap_test']['p']:.2g} "
+          f"({v['gap_test']['cells']} test x signal cells). Rule: {rep['method']['rule']}"]
     L += ["", "## Where the gap lies", ""]
     if rep["gap_cells"]:
         L += ["| test | signal | phase | t [s] | NRMSE | systematic gap | bias | lag [s] | share |", "|---|---|---|---|---|---|---|---|---|"]
@@ -173,7 +166,8 @@ def write_report(diag, out: Path, figures: bool = True) -> dict:
     for e in rep["excluded"]:
         L.append(f"| {e['test']} | EXCLUDED | | | | | {e['reason']} |")
     m = rep["method"]
-    L += ["", "## Method", "", f"- folds: {'leave-one-test-out' if isinstance(m['folds'], list) else m['folds']}",
+    folds = "; ".join(f"{f['kind']}: {f['heldout']}" for f in m["folds"])
+    L += ["", "## Method", "", f"- folds (held out): {folds}",
           f"- loss: {m['loss']}", f"- score: {m['score']}", f"- gap: {m['gap']}", f"- search: {m['search']}",
           f"- thresholds: {m['thresholds']}", "", "Machine-readable: `report.json`."]
     (out / "report.md").write_text("\n".join(L) + "\n", encoding="utf-8")

@@ -1,0 +1,162 @@
+"""Statistical tests of the diagnosis: is the base model's gap real, does a candidate beat another one.
+
+Both tests work on samples, and both account for the autocorrelation of what they sum.
+
+**Is the gap real** (:func:`gap_test`). Under the null hypothesis the base model is right and a log's
+residual e = sim − meas is the instruments' noise. The noise is modelled per log and channel as an
+AR(1) process whose innovation level and lag-1 coefficient ρ are estimated from the log itself
+(:func:`noise_ar1`: from the consecutive differences, where a smooth signal hardly contributes; a
+signal that does contribute makes ρ larger and the test more conservative). The statistic is
+T = Σ_k e_k² / σ² over the compared samples (K of them). Under the null E[T] = K and, for a Gaussian
+AR(1), Var[T] = 2K(1 + ρ²)/(1 − ρ²); the uncertainty of σ̂ itself (a MAD estimate from K differences)
+adds (K · δ)² with δ² = 4 · 1.36 / K. z = (T − K)/√Var, one-sided p = 1 − Φ(z). The per
+test × signal p-values are combined by Bonferroni (min p × number of cells): the gap is real if
+that is below α.
+
+**Does candidate A beat candidate B** (:func:`dm_test`): a Diebold-Mariano test of equal predictive
+accuracy. Per sample k of the held-out predictions, the loss differential d_k = ℓ_B,k − ℓ_A,k (the
+fit's per-sample loss term). Per test, the mean d̄_j and its variance by the Newey-West (Bartlett)
+estimator with a bandwidth of at least twice the integrated correlation time of d (so that the slow
+systematic differences, not only the noise, are counted as correlated); tests are independent, so
+D = Σ_j d̄_j (each test counts once, like the loss) has variance Σ_j v_j. z = D / √V, one-sided
+p = 1 − Φ(z).
+
+**Intervals** (:func:`block_bootstrap`): a moving-block bootstrap whose block length per test is the
+correlation time of the squared residuals (at least 0.2 s), tests resampled when there are three or
+more; the 95 % interval is the percentile interval of the resampled statistic recentred on the point
+estimate (θ̂ + quantiles of θ* − median θ*), so that it always contains the point estimate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import norm
+
+ALPHA = 0.05
+MAD_EFFICIENCY = 1.36  # Var(σ̂_MAD)/σ² · (2K): the MAD's variance inflation over the sample SD (Gaussian)
+
+
+def _finite(x):
+    x = np.asarray(x, np.float64)
+    return x[np.isfinite(x)]
+
+
+def noise_ar1(x: np.ndarray) -> tuple[float, float]:
+    """(σ, ρ) of a log channel's noise as an AR(1) process, from its consecutive differences.
+
+    For AR(1) noise of variance σ² the differences have variance 2σ²(1 − ρ) and lag-1 correlation
+    −(1 − ρ)/2, so ρ = 1 + 2 r₁(Δx) (clipped to [0, 0.95]); σ² = σ̂_Δ² / (2(1 − ρ)) with σ̂_Δ the
+    MAD-based level of the differences.
+    """
+    d = np.diff(np.asarray(x, np.float64))
+    d = d[np.isfinite(d)]
+    if d.size < 10:
+        return float("nan"), 0.0
+    s = 1.4826 * np.median(np.abs(d - np.median(d)))
+    if not s > 0:
+        return 0.0, 0.0
+    c = np.clip(d - np.median(d), -4 * s, 4 * s)  # winsorised: steps of the signal do not decide ρ
+    r1 = float(np.sum(c[1:] * c[:-1]) / np.sum(c * c))
+    rho = float(np.clip(1.0 + 2.0 * r1, 0.0, 0.95))
+    return float(s / math.sqrt(2.0 * (1.0 - rho))), rho
+
+
+def gap_test(e: np.ndarray, sigma: float, rho: float) -> tuple[float, float]:
+    """(z, one-sided p) of "the residuals ``e`` are more than AR(1) noise of level σ, coefficient ρ"."""
+    e = _finite(e)
+    K = e.size
+    if K < 5 or not sigma > 0:
+        return 0.0, 1.0
+    T = float(np.sum((e / sigma) ** 2))
+    var = 2.0 * K * (1.0 + rho**2) / (1.0 - rho**2) + K * 4.0 * MAD_EFFICIENCY / max(1.0 - rho, 0.05)
+    z = (T - K) / math.sqrt(var)
+    return float(z), float(norm.sf(z))
+
+
+def correlation_time(x: np.ndarray, max_lag: int | None = None) -> float:
+    """Integrated autocorrelation time of ``x`` in samples (1 for white noise): 1 + 2 Σ r_l up to the first r_l ≤ 0."""
+    x = _finite(x)
+    n = x.size
+    if n < 4:
+        return 1.0
+    x = x - x.mean()
+    v = float(np.dot(x, x))
+    if v <= 0:
+        return 1.0
+    max_lag = min(n // 3, max_lag or n // 3)
+    f = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[: max_lag + 1] / v
+    tau = 1.0
+    for r in ac[1:]:
+        if r <= 0:
+            break
+        tau += 2.0 * r
+    return float(tau)
+
+
+def hac_mean_var(d: np.ndarray) -> tuple[float, float, int]:
+    """(mean, variance of the mean, bandwidth) of ``d`` by Newey-West with a bandwidth ≥ 2 correlation times."""
+    d = _finite(d)
+    n = d.size
+    if n < 3:
+        return (float(d.mean()) if n else 0.0), float("inf"), 0
+    m = float(d.mean())
+    x = d - m
+    L = int(min(n // 2, max(math.ceil(4 * (n / 100) ** (2 / 9)), math.ceil(2 * correlation_time(d)))))
+    g0 = float(np.dot(x, x)) / n
+    s = g0
+    for lag in range(1, L + 1):
+        s += 2.0 * (1.0 - lag / (L + 1)) * float(np.dot(x[lag:], x[:-lag])) / n
+    return m, max(s, g0 / n) / n, L
+
+
+def dm_test(loss_a: list, loss_b: list) -> dict:
+    """Diebold-Mariano: does A (per-test per-sample losses) have lower expected loss than B?
+
+    ``loss_a[j]``, ``loss_b[j]``: (K_j,) per-sample losses of test j (NaN: not compared).
+    Returns {"z", "p", "diff"} with diff = Σ_j mean(ℓ_B − ℓ_A) (> 0: A better), p one-sided.
+    """
+    D, V = 0.0, 0.0
+    for a, b in zip(loss_a, loss_b):
+        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+        ok = np.isfinite(a) & np.isfinite(b)
+        if ok.sum() < 3:
+            continue
+        m, v, _ = hac_mean_var(b[ok] - a[ok])
+        D += m
+        V += v
+    if not (V > 0) or not np.isfinite(V):
+        return {"z": 0.0, "p": 1.0, "diff": D}
+    z = D / math.sqrt(V)
+    return {"z": float(z), "p": float(norm.sf(z)), "diff": float(D)}
+
+
+def block_length(x: np.ndarray, dt: float, min_s: float = 0.2) -> int:
+    """Block length [samples] of a moving-block bootstrap: the correlation time of ``x``, at least ``min_s``."""
+    return int(max(round(min_s / dt), math.ceil(correlation_time(x)), 1))
+
+
+def block_draws(lengths: list[int], blocks: list[int], rng, n_boot: int) -> list[tuple[list, list]]:
+    """``n_boot`` draws of (tests, per drawn test the resampled indices) for tests of ``lengths`` samples."""
+    n = len(lengths)
+    out = []
+    for _ in range(n_boot):
+        which = list(rng.integers(0, n, n)) if n >= 3 else list(range(n))
+        idx = []
+        for j in which:
+            k, L = lengths[j], min(blocks[j], lengths[j])
+            starts = rng.integers(0, k - L + 1, int(np.ceil(k / L)))
+            idx.append((starts[:, None] + np.arange(L)[None]).ravel()[:k])
+        out.append((which, idx))
+    return out
+
+
+def centred_interval(point: float, boot: np.ndarray, level: float = 0.95) -> tuple[float, float]:
+    """Percentile interval of ``boot`` recentred on ``point`` (contains ``point`` by construction)."""
+    b = _finite(boot)
+    if b.size < 10 or not np.isfinite(point):
+        return (float("nan"), float("nan"))
+    q = np.percentile(b - np.median(b), [50 * (1 - level), 50 * (1 + level)])
+    return float(point + q[0]), float(point + q[1])
