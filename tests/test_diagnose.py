@@ -43,11 +43,19 @@ def test_noise_level_is_robust_to_the_signal():
 
 def test_folds_hold_out_repeated_tests_and_forward_chain_unique_ones():
     tests, _ = load_tests(TWIN, ["go_stop_dry_sand", "go_stop_2ms_dry_sand", "zero_radius_turn_dry_sand"])
+    # the 1.1 m/s and 2 m/s go-stops are the same maneuver at different operating points: not repeats
+    assert {f.kind for f in make_folds(tests)} == {"forward"}
+    import copy
+
+    rep = copy.copy(next(t for t in tests if t.name == "go_stop_dry_sand"))
+    rep.name = "go_stop_again"
+    tests = tests + [rep]
     folds = make_folds(tests)
     kinds = {tests[f.held].name: f.kind for f in folds}
-    assert kinds == {"go_stop_dry_sand": "test", "go_stop_2ms_dry_sand": "test", "zero_radius_turn_dry_sand": "forward"}
+    assert kinds == {"go_stop_dry_sand": "test", "go_stop_again": "test", "go_stop_2ms_dry_sand": "forward",
+                     "zero_radius_turn_dry_sand": "forward"}
     for f in folds:
-        assert f.weights.shape == (3, 2)
+        assert f.weights.shape == (4, 2)
         if f.kind == "test":
             assert np.all(f.weights[f.held] == 0)  # nothing of the held-out test in the calibration
         else:  # head fitted, tail predicted
@@ -171,7 +179,7 @@ def viscous_go_stop(tmp_path_factory):
     out = tmp_path_factory.mktemp("diag_visc")
     d = diagnose(TWIN, out, tests=["go_stop_dry_sand", "go_stop_2ms_dry_sand"], internal_resistance="viscous",
                  candidates=["internal_resistance", "recalibrate_base", "sensor_artifacts", "lateral_friction_radius"],
-                 progress=False)
+                 progress=False, rounds=2, polish_iters=2)
     return d, out
 
 
@@ -280,17 +288,18 @@ def test_cli_bad_folder_exits_2(tmp_path, capsys):
     assert "no such folder" in capsys.readouterr().err
 
 
-# The withheld-effect check, small CI version. Threshold: at least 2 of these 3 blind cases (effects in forms
-# the candidate library does not have; labels withheld) get the right verdict. The full benchmark
-# (trackenv diagnose-benchmark --cases 21) is in the README.
-CI_LABELS = ["internal_resistance", "slip_sinkage", "none"]
+# The withheld-effect check, small CI version (the benchmark's budget: 3 tests of at most 6 s, 8 search points,
+# 1 cross-entropy round, no polish). Threshold: at least 2 of these 3 blind cases (effects in forms the
+# candidate library does not have; labels withheld) get the right verdict, and the null case is not flagged.
+# The 40-case benchmark (top-1 0.45) is in docs/diagnose_benchmark.md.
+CI_LABELS = ["lateral_friction_radius", "slip_sinkage", "none"]
 
 
 def test_blind_benchmark_small(tmp_path):
     from trackenv.diagnose.benchmark import run_benchmark
 
-    res = run_benchmark(tmp_path, len(CI_LABELS), seed=3, labels=CI_LABELS, n_tests=3, t_max=7.0, rounds=2,
-                        polish_iters=2, near_limit_fraction=0.0, progress=False)
+    res = run_benchmark(tmp_path, len(CI_LABELS), seed=3, labels=CI_LABELS, n_tests=3, t_max=6.0, rounds=1,
+                        search_points=8, polish_iters=0, near_limit_fraction=0.0, progress=False)
     s = res["summary"]
     assert sum(r["verdict"] == r["label"] for r in res["cases"]) >= 2, res["cases"]
     assert s["null_false_positive_rate"] == 0.0
@@ -303,4 +312,4 @@ def test_blind_benchmark_small(tmp_path):
     assert [r["verdict"] for r in again["rows"]] == [r["verdict"] for r in res["cases"]]
     # the label never reaches the case folders
     for f in (tmp_path / "cases").rglob("*.json"):
-        assert "internal_resistance" not in f.read_text() and "slip_sinkage" not in f.read_text()
+        assert "lateral_friction" not in f.read_text() and "slip_sinkage" not in f.read_text()

@@ -328,7 +328,8 @@ def cmd_diagnose_benchmark(args) -> int:
         return 0
     res = run_benchmark(args.out, args.cases, seed=args.seed, null_fraction=args.null_fraction, labels=labels,
                         n_tests=args.tests_per_case, t_max=args.t_max, near_limit_fraction=args.near_limit_fraction,
-                        rounds=args.rounds, polish_iters=args.polish_iters, alpha=args.alpha)
+                        rounds=args.rounds, search_points=args.search_points, polish_iters=args.polish_iters,
+                        alpha=args.alpha)
     s = res["summary"]
     print(json.dumps({k: v for k, v in s.items() if k != "confusion"}, indent=1))
     print(f"report: {Path(args.out) / 'benchmark.md'}")
@@ -432,6 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--near-limit-fraction", type=float, default=1 / 3,
                    help="fraction of effect cases drawn near the detection limit (1-3 noise sigma)")
     b.add_argument("--rounds", type=int, default=3, help="cross-entropy rounds of the search")
+    b.add_argument("--search-points", type=int, default=16, help="points per search round")
     b.add_argument("--polish-iters", type=int, default=4, help="Levenberg-Marquardt iterations per fit")
     b.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdict rule")
     b.add_argument("--rescore", action="store_true",

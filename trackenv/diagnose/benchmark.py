@@ -240,3 +240,30 @@ def _write(out: Path, rows: list[dict], seed: int, timing: dict) -> dict:
                  f"{ins} | {vis} | {', '.join(r['maneuvers'])} ({r['terrain']}) | {r['reason']} |")
     (out / "benchmark.md").write_text("\n".join(L) + "\n", encoding="utf-8")
     return result
+
+
+def refresh_gap_tests(out_dir: str | Path, pad_s: float | None = None, internal_resistance: str = "constant") -> int:
+    """Recompute the gap test (:func:`.core.gap_cells`) of every cached case from its logs and one simulation
+    of the base model (seconds per case; the fits are not touched). Returns the number of cases updated."""
+    from .batch import BatchSimulator
+    from .candidates import candidate_set
+    from .core import ALPHA, gap_cells
+    from .data import load_tests
+
+    out = Path(out_dir)
+    none = [c for c in candidate_set(internal_resistance) if c.name == NONE][0]
+    k = 0
+    for ev_file in sorted((out / "reports").glob("*/evidence.json")):
+        data, _ = load_tests(out / "cases" / ev_file.parent.name)
+        pred, _ = BatchSimulator(data, internal_resistance, pad_s=pad_s).run(none, {})
+        pred = [{s: v[:, 0] for s, v in p.items()} for p in pred]
+        ev = json.loads(ev_file.read_text())
+        cells = gap_cells(data, pred)
+        ev["gap_cells"] = cells
+        ev["gap_cells_tested"] = len(cells)
+        ev["gap_p"] = min(1.0, min(c["p"] for c in cells) * len(cells)) if cells else 1.0
+        ev["gap_z_max"] = max((c["z"] for c in cells), default=0.0)
+        ev["gap_alpha"] = ALPHA
+        ev_file.write_text(json.dumps(ev, indent=1) + "\n")
+        k += 1
+    return k

@@ -649,15 +649,15 @@ def _stack(trees):
                         if eqx.is_inexact_array_like(xs[0]) else xs[0], *trees)
 
 
-def _batch_profile(col_profiles):
+def _batch_profile(col_profiles, t_sim=T_SIM):
     """One VoltageProfile (K_PAD, 2, B) from per-column breakpoint profiles [(t, volts), ...] (B = N_COLS)."""
     import trackenv as te
 
-    tt = np.unique(np.round(np.concatenate([t for t, _ in col_profiles] + [[T_SIM]]), 9))
-    tt = tt[tt <= T_SIM + 1e-9]
+    tt = np.unique(np.round(np.concatenate([t for t, _ in col_profiles] + [[t_sim]]), 9))
+    tt = tt[tt <= t_sim + 1e-9]
     if tt.size > K_PAD:
         raise ValueError(f"too many breakpoints ({tt.size} > {K_PAD})")
-    tt = np.concatenate([tt, T_SIM + 0.1 * np.arange(1, K_PAD - tt.size + 1)])
+    tt = np.concatenate([tt, t_sim + 0.1 * np.arange(1, K_PAD - tt.size + 1)])
     volts = np.zeros((K_PAD, 2, len(col_profiles)))
     for j, (t, v) in enumerate(col_profiles):
         for c in range(2):
@@ -665,8 +665,9 @@ def _batch_profile(col_profiles):
     return te.VoltageProfile.from_arrays(tt, volts, source="blind case")
 
 
-def _simulate_columns(columns, col_profiles):
-    """Simulate N_COLS vehicles in one batch; ``columns``: [(terrain, nuisance, effect or None)] per column.
+def _simulate_columns(columns, col_profiles, t_sim=T_SIM):
+    """Simulate N_COLS vehicles in one batch; ``columns``: [(terrain, nuisance, effect or None)] per column;
+    ``t_sim`` [s]: the simulated duration (the longest test; ``T_SIM`` by default).
 
     Returns the channels {name: (T, N_COLS)} (float64) and the per-column divergence flags.
     """
@@ -682,7 +683,7 @@ def _simulate_columns(columns, col_profiles):
             cache[key] = _params(terrain, nuisance, effect)
         trees.append(cache[key])
     params = _stack(trees)
-    traj = te.simulate(params, _batch_profile(col_profiles), T_SIM, dt=SIM_DT, on_divergence="flag")
+    traj = te.simulate(params, _batch_profile(col_profiles, t_sim), t_sim, dt=SIM_DT, on_divergence="flag")
     ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
     return ch, np.asarray(traj.diverged)
 
@@ -795,6 +796,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
     if not 1 <= n_tests <= MAX_TESTS:
         raise ValueError(f"n_tests must be 1..{MAX_TESTS}, got {n_tests}")
     case_dir = Path(case_dir)
+    t_sim = T_SIM if t_max is None else float(t_max)
 
     if label == "slip_sinkage":
         terrain = str(rng.choice(DEFORMABLE_TERRAINS))
@@ -825,7 +827,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
     base = (terrain, nuisance, None)
     if label == "none":
         tests, profiles = draw_tests()
-        ch, div = _simulate_columns([base] * N_COLS, _columns(profiles) * 2)
+        ch, div = _simulate_columns([base] * N_COLS, _columns(profiles) * 2, t_sim)
         if div.any():
             raise RuntimeError("base simulation diverged")
         ch = _half(ch, 0)
@@ -845,7 +847,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
                 else:
                     effs = [cls.sample(rng, terrain), cls.sample(rng, terrain)]
                 ch2, div2 = _simulate_columns([(terrain, nuisance, effs[0])] * MAX_TESTS
-                                              + [(terrain, nuisance, effs[1])] * MAX_TESTS, cols * 2)
+                                              + [(terrain, nuisance, effs[1])] * MAX_TESTS, cols * 2, t_sim)
                 for h, eff in enumerate(effs):
                     ch_h, div_h = _half(ch2, h), div2[h * MAX_TESTS:(h + 1) * MAX_TESTS]
                     if eff is None:

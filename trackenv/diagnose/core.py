@@ -26,7 +26,7 @@ from .candidates import NONE, RECALIBRATE, candidate_set
 from .data import DiagnosisError, TestData, load_tests
 from .fit import CandidateFit, fit_candidate, make_folds
 from .metrics import (cell_ci, cell_table, gap_carriers, overall_gap, overall_gap_range, overall_nrmse,
-                      signal_weight, sq_errors)
+                      signal_error, signal_weight, sq_errors)
 from .stats import ALPHA, block_draws, block_length, centred_interval, dm_test, gap_test, noise_ar1
 
 COMPLEXITY = 0.02
@@ -83,6 +83,24 @@ def _masked(sq: list[dict], masks: list) -> list[dict]:
     return [{s: np.where(m, e2, np.nan) for s, e2 in d.items()} for d, m in zip(sq, masks)]
 
 
+def gap_cells(data: list[TestData], base_pred: list[dict]) -> list[dict]:
+    """Is the base model's gap real: the AR(1)-noise χ² test (:func:`.stats.gap_test`) per test × signal.
+
+    The noise's level and lag-1 coefficient come from the consecutive differences of the base model's
+    *residual* (sim − meas over the compared samples): the model has removed the signal, so the
+    differences see the noise (plus the small per-sample change of a smooth systematic gap).
+    """
+    cells = []
+    for j, t in enumerate(data):
+        for sig in t.measured:
+            e = signal_error(t, sig, base_pred[j][sig])
+            e = np.where(t.fit_mask, e, np.nan)
+            sigma, rho = noise_ar1(e)
+            z, p = gap_test(e[np.isfinite(e)], sigma, rho)
+            cells.append({"test": t.name, "signal": sig, "z": z, "p": p, "rho": rho, "sigma": sigma})
+    return cells
+
+
 def evidence(data: list[TestData], fits: dict) -> dict:
     """What the verdict rule needs, per candidate and per sample (JSON/npz-cacheable: see :func:`save_evidence`)."""
     masks = fits[NONE].heldout_masks  # every candidate has the same folds, hence the same masks
@@ -92,14 +110,7 @@ def evidence(data: list[TestData], fits: dict) -> dict:
     sq_base_held = _masked(sq_base, masks)
     gap_before = overall_gap(data, sq_base)
     gap_before_held = overall_gap(data, sq_base_held)
-    # is the base model's gap real: AR(1)-noise chi-square test per test x signal
-    cells = []
-    for j, t in enumerate(data):
-        for sig, e2 in sq_base[j].items():
-            sigma, rho = noise_ar1(t.measured[sig])
-            e = np.sqrt(e2[np.isfinite(e2)])
-            z, p = gap_test(e, sigma, rho)
-            cells.append({"test": t.name, "signal": sig, "z": z, "p": p, "rho": rho})
+    cells = gap_cells(data, fits[NONE].full_pred)
     ev = {"tests": [t.name for t in data], "n_tests": len(data), "gap_cells_tested": len(cells),
           "gap_p": min(1.0, min(c["p"] for c in cells) * len(cells)) if cells else 1.0,
           "gap_z_max": max((c["z"] for c in cells), default=0.0), "gap_cells": cells,
@@ -268,7 +279,7 @@ def load_evidence(path: Path) -> dict:
 
 def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: list[str] | None = None,
              internal_resistance: str = "constant", candidates: list[str] | None = None, substep: float = FIT_SUBSTEP,
-             seed: int = 0, rounds: int = 3, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
+             seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
              progress: bool = True, pad_s: float | None = None, cache: str | Path | None = None) -> Diagnosis:
     """Diagnose the gap between the simulator and the field tests in ``folder`` (one sub-folder per test).
 
@@ -279,6 +290,10 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         candidates: restrict the candidate set (names from :func:`.candidates.candidate_set`;
             ``none`` is always included). substep: integration substep of the fits [s].
         seed: seeds the search and the bootstrap. rounds: refinement rounds of the search.
+        search_points: points per search round (at least 3 per fold). polish_iters: Levenberg-Marquardt
+            iterations per fit (0: derivative-free search only). alpha: significance level of the rule.
+        pad_s: pad every test to this duration [s] in one batch (fixed shapes across diagnoses, :mod:`.batch`).
+        cache: a folder to write the verdict's evidence to (:func:`save_evidence`).
         figures: draw the PNGs. progress: show a progress bar on stderr.
 
     Raises:
@@ -315,7 +330,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             planned += len(data)
         else:
             F = len(folds) + 1
-            m = max(3, int(np.ceil(16 / F)))
+            m = max(3, int(np.ceil(search_points / F)))
             planned += len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters)
     bar = tqdm(total=planned, desc="diagnose", unit="sim", disable=not progress, leave=False)
     fits: dict[str, CandidateFit] = {}
@@ -324,7 +339,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     for c in order:
         bar.set_postfix_str(c.name)
         t0 = time.perf_counter()
-        fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, polish_iters=polish_iters,
+        fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
+                                     polish_iters=polish_iters,
                                      progress=bar.update)
         t_fit[c.name] = time.perf_counter() - t0
     bar.close()

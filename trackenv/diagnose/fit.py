@@ -14,7 +14,8 @@ sum).
 **Folds** (:func:`make_folds`, one per test, never a random split of samples):
 
 - a test whose maneuver the folder *repeats* (another test with the same ``maneuver`` in
-  ``meta.json``) is held out whole: the fold is fitted on every other test and predicts this one;
+  ``meta.json`` at a similar operating point: peak mean |V| and peak |ΔV| within 25 %, :func:`repeats`)
+  is held out whole: the fold is fitted on every other test and predicts this one;
 - a test whose maneuver is unique (another test cannot stand in for it) is *forward-chained*: the fold
   is fitted on every other test plus this test's head, and predicts its tail (the part of the test
   after the data it was fitted on). An effect that only this test excites is then still measured
@@ -110,15 +111,30 @@ class Fold:
         return tuple(int(j) for j in np.flatnonzero(self.weights.sum(axis=1) > 0))
 
 
+def _operating_point(test: TestData) -> tuple[float, float]:
+    """(peak mean |V|, peak |V_r − V_l|) of a test's commands [V]."""
+    v = test.volts
+    return float(np.max(np.abs(v.mean(axis=1)))), float(np.max(np.abs(v[:, 1] - v[:, 0])))
+
+
+def repeats(a: TestData, b: TestData, tol: float = 0.25) -> bool:
+    """True if ``b`` repeats ``a``'s maneuver: the same ``maneuver`` in meta.json at a similar operating point
+    (peak mean |V| and peak |ΔV| within ``tol`` relative, or 1 V)."""
+    if str(a.log.maneuver or a.name) != str(b.log.maneuver or b.name):
+        return False
+    pa, pb = _operating_point(a), _operating_point(b)
+    return all(abs(x - y) <= max(1.0, tol * max(abs(x), abs(y))) for x, y in zip(pa, pb))
+
+
 def make_folds(tests: list[TestData]) -> list[Fold]:
-    """One fold per test: held out whole where its maneuver repeats in the folder, else forward-chained."""
+    """One fold per test: held out whole where another test repeats its maneuver (:func:`repeats`), else
+    forward-chained."""
     n = len(tests)
     fr = np.stack([part_fractions(t) for t in tests])
-    mans = [str(t.log.maneuver or t.name) for t in tests]
     folds = []
     for j in range(n):
         w = fr.copy()
-        if n >= 2 and mans.count(mans[j]) >= 2:
+        if any(repeats(tests[j], tests[k]) for k in range(n) if k != j):
             w[j] = 0.0
             folds.append(Fold(j, "test", w))
         else:

@@ -83,7 +83,7 @@ class _Problem:
                 self.coef.append(np.sqrt(c))
                 self.sigs.append((j, s))
         self.windows = np.array([0.0 if w is None else float(w) for w in windows])
-        self._fn = jax.jit(self._value_and_jac)
+        self._fn = self._value_and_jac  # eager: the simulation inside is one jitted call whose JVP jax caches by shape
 
     def _predict(self, z):
         """z (F, p) -> {(j, sig): (F, K_j)} predictions at the logs' sample times."""

@@ -4,9 +4,10 @@ Both tests work on samples, and both account for the autocorrelation of what the
 
 **Is the gap real** (:func:`gap_test`). Under the null hypothesis the base model is right and a log's
 residual e = sim − meas is the instruments' noise. The noise is modelled per log and channel as an
-AR(1) process whose innovation level and lag-1 coefficient ρ are estimated from the log itself
-(:func:`noise_ar1`: from the consecutive differences, where a smooth signal hardly contributes; a
-signal that does contribute makes ρ larger and the test more conservative). The statistic is
+AR(1) process whose level σ and lag-1 coefficient ρ are estimated from the consecutive differences of
+the residual itself (:func:`noise_ar1`; the model has taken the signal out, and a smooth systematic
+gap hardly changes from one sample to the next; what it does contribute makes ρ and σ larger and the
+test more conservative). The statistic is
 T = Σ_k e_k² / σ² over the compared samples (K of them). Under the null E[T] = K and, for a Gaussian
 AR(1), Var[T] = 2K(1 + ρ²)/(1 − ρ²); the uncertainty of σ̂ itself (a MAD estimate from K differences)
 adds (K · δ)² with δ² = 4 · 1.36 / K. z = (T − K)/√Var, one-sided p = 1 − Φ(z). The per
