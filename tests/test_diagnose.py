@@ -244,8 +244,6 @@ def test_base_model_plus_noise_gives_none(tmp_path):
     assert d.verdict["effect"] == "none", d.verdict
     # no effect passes the rule; the gap test itself may find the small systematic difference between the logs'
     # 0.5 ms integration and the fit's 1 ms one (measured: one brake-phase current cell)
-    assert all(r["p_beats_none"] >= 0.05 / 4 or r["effect"] == "none" for r in d.report["ranking"]
-               if r["effect"] not in ("recalibrate_base",)) or d.verdict["effect"] == "none"
     # the polish ran and reports its convergence honestly; it never makes a fit worse
     for r in d.report["ranking"]:
         for info in [r["polish"]["full"]] + r["polish"]["folds"]:
