@@ -9,7 +9,10 @@ that the code cites. This tool rewrites, in every tracked text file (``git ls-fi
    to ``docs/model.md``;
 2. every other bare mention of the upper-case specification file name (``<SPEC> §6``, ``<SPEC>'s frame``,
    ``a port of <SPEC>``) to ``docs/model.md`` (so ``<SPEC> §N`` becomes ``docs/model.md §N``);
-3. with ``--checkout-prefix PREFIX`` (repeatable): absolute paths ``PREFIX/<tracked path>`` written into
+3. with ``--strip-issue-refs``: planning-issue references in parentheses, "(<issue> 4)", "(<issue> 5; X)" ->
+   "(X)", "; <issue> \"Title\")" -> ")", "<issue> 4's target" -> "target" (<issue> = the word; other
+   mentions are listed for a person to rewrite);
+4. with ``--checkout-prefix PREFIX`` (repeatable): absolute paths ``PREFIX/<tracked path>`` written into
    generated files (training records, results) to the repository-relative ``<tracked path>``.
 
 <SPEC> stands for the upper-case spelling of ``docs/model.md``'s file name. The patterns below escape the
@@ -44,6 +47,14 @@ LINK_TARGET = re.compile(r"\]\((?P<path>(?:\.\./)+(?:[\w.-]+/)*" + _SPEC + r")(?
 RELATIVE_PATH = re.compile(r"(?:\.\./)+(?:[\w.-]+/)*" + _SPEC)
 # A bare SPEC not already part of a path or a longer name.
 BARE = re.compile(r"(?<![\w/.-])" + _SPEC)
+_ISSUE = r"[Ii]ssues?\s+#?\d+"
+ISSUE_SUBS = [
+    (re.compile(r"\s*\(" + _ISSUE + r"\)"), ""),
+    (re.compile(r"\(" + _ISSUE + r";\s*"), "("),
+    (re.compile(r";\s*[Ii]ssue\s+\"[^\"\n]+\"\)"), ")"),
+    (re.compile(_ISSUE + r"'s\s+target"), "target"),
+]
+ISSUE_LEFT = re.compile(r"\b" + _ISSUE + r"|\b[Ii]ssues?\s+\"[^\"\n]+\"")
 REVIEW = re.compile(r"(?i)\b(misprint\w*|prints|printed|typo|deviation\w*|throwaway)\b")
 TEXT_SUFFIXES = {".py", ".md", ".txt", ".yaml", ".yml", ".toml", ".json", ".ipynb", ".csv", ".cfg", ".ini", ""}
 
@@ -69,7 +80,8 @@ def read_text(path: Path) -> str | None:
         return None
 
 
-def rewrite(text: str, rel: str, tracked: set[str], prefixes: list[str]) -> tuple[str, Counter]:
+def rewrite(text: str, rel: str, tracked: set[str], prefixes: list[str],
+            strip_issues: bool = False) -> tuple[str, Counter]:
     """Return the rewritten text of the file ``rel`` and the count of rewrites by kind."""
     counts: Counter = Counter()
     here = os.path.dirname(rel)
@@ -90,6 +102,12 @@ def rewrite(text: str, rel: str, tracked: set[str], prefixes: list[str]) -> tupl
     text = LINK_TARGET.sub(link_sub, text)
     text = RELATIVE_PATH.sub(path_sub, text)
     text = BARE.sub(bare_sub, text)
+    if strip_issues:
+        for pattern, repl in ISSUE_SUBS:
+            text, n = pattern.subn(repl, text)
+            counts["issue reference"] += n
+        if not counts["issue reference"]:
+            del counts["issue reference"]
     for prefix in prefixes:
         prefix = prefix.rstrip("/") + "/"
         pattern = re.compile(re.escape(prefix) + r"(?P<tail>[\w.+/-]+)")
@@ -111,12 +129,14 @@ def main(argv=None) -> int:
     ap.add_argument("--write", action="store_true", help="apply the changes (default: dry run)")
     ap.add_argument("--checkout-prefix", action="append", default=[], metavar="PREFIX",
                     help="an absolute checkout path to strip from generated files (repeatable)")
+    ap.add_argument("--strip-issue-refs", action="store_true", help="remove planning-issue references (see above)")
     args = ap.parse_args(argv)
     root = args.root.resolve()
     files = tracked_files(root)
     tracked = set(files)
     total: Counter = Counter()
     review: list[str] = []
+    left: list[str] = []
     for rel in sorted(files):
         path = root / rel
         if not path.is_file():
@@ -124,7 +144,11 @@ def main(argv=None) -> int:
         text = read_text(path)
         if text is None:
             continue
-        new, counts = rewrite(text, rel, tracked, args.checkout_prefix)
+        new, counts = rewrite(text, rel, tracked, args.checkout_prefix, args.strip_issue_refs)
+        if args.strip_issue_refs:
+            for k, line in enumerate(new.splitlines(), start=1):
+                if ISSUE_LEFT.search(line):
+                    left.append(f"{rel}:{k}: {line.strip()[:160]}")
         if new == text:
             continue
         total.update(counts)
@@ -140,6 +164,9 @@ def main(argv=None) -> int:
     if review:
         print("\nreread these lines (the sentence may describe the old file, not docs/model.md):")
         print("\n".join(review))
+    if left:
+        print("\nplanning-issue references left for a person to rewrite:")
+        print("\n".join(left))
     return 0
 
 
