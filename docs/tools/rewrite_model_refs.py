@@ -12,7 +12,10 @@ that the code cites. This tool rewrites, in every tracked text file (``git ls-fi
 3. with ``--strip-issue-refs``: planning-issue references in parentheses, "(<issue> 4)", "(<issue> 5; X)" ->
    "(X)", "; <issue> \"Title\")" -> ")", "<issue> 4's target" -> "target" (<issue> = the word; other
    mentions are listed for a person to rewrite);
-4. with ``--checkout-prefix PREFIX`` (repeatable): absolute paths ``PREFIX/<tracked path>`` written into
+4. with ``--fix-wording``: the few sentences that the rewrite would make untrue, because they describe the
+   old file ("<spec> §2 prints 0.0244221": docs/model.md §2 gives Table 4.1's value and says that
+   Table B.3 prints 0.0244221) or how a port was made ("throwaway port" -> "independent port");
+5. with ``--checkout-prefix PREFIX`` (repeatable): absolute paths ``PREFIX/<tracked path>`` written into
    generated files (training records, results) to the repository-relative ``<tracked path>``.
 
 <SPEC> stands for the upper-case spelling of ``docs/model.md``'s file name. The patterns below escape the
@@ -22,7 +25,8 @@ Usage (from the repository root)::
 
     python docs/tools/rewrite_model_refs.py                 # dry run: what would change, per file
     python docs/tools/rewrite_model_refs.py --write         # apply
-    python docs/tools/rewrite_model_refs.py --write --checkout-prefix /path/of/the/old/checkout
+    python docs/tools/rewrite_model_refs.py --write --strip-issue-refs --fix-wording \\
+        --checkout-prefix /path/of/the/checkout/that/wrote/train/results
 
 It prints the number of rewritten references per file and kind, then the lines a person should reread
 because the sentence around a reference may describe the old file rather than ``docs/model.md``
@@ -55,6 +59,12 @@ ISSUE_SUBS = [
     (re.compile(_ISSUE + r"'s\s+target"), "target"),
 ]
 ISSUE_LEFT = re.compile(r"\b" + _ISSUE + r"|\b[Ii]ssues?\s+\"[^\"\n]+\"")
+WORDING = [
+    (re.compile(r"\ba throwaway port of docs/model\.md"), "an independent port of docs/model.md"),
+    (re.compile(r"\bthrowaway port of docs/model\.md"), "independent port of docs/model.md"),
+    (re.compile(r"docs/model\.md §2 misprints 0\.0244221"), "Table B.3 prints 0.0244221"),
+    (re.compile(r"docs/model\.md §2 prints b_eff = 0\.0244221"), "Table B.3 prints b_eff = 0.0244221"),
+]
 REVIEW = re.compile(r"(?i)\b(misprint\w*|prints|printed|typo|deviation\w*|throwaway)\b")
 TEXT_SUFFIXES = {".py", ".md", ".txt", ".yaml", ".yml", ".toml", ".json", ".ipynb", ".csv", ".cfg", ".ini", ""}
 
@@ -81,7 +91,7 @@ def read_text(path: Path) -> str | None:
 
 
 def rewrite(text: str, rel: str, tracked: set[str], prefixes: list[str],
-            strip_issues: bool = False) -> tuple[str, Counter]:
+            strip_issues: bool = False, fix_wording: bool = False) -> tuple[str, Counter]:
     """Return the rewritten text of the file ``rel`` and the count of rewrites by kind."""
     counts: Counter = Counter()
     here = os.path.dirname(rel)
@@ -102,6 +112,11 @@ def rewrite(text: str, rel: str, tracked: set[str], prefixes: list[str],
     text = LINK_TARGET.sub(link_sub, text)
     text = RELATIVE_PATH.sub(path_sub, text)
     text = BARE.sub(bare_sub, text)
+    if fix_wording:
+        for pattern, repl in WORDING:
+            text, n = pattern.subn(repl, text)
+            if n:
+                counts["wording"] += n
     if strip_issues:
         for pattern, repl in ISSUE_SUBS:
             text, n = pattern.subn(repl, text)
@@ -130,6 +145,7 @@ def main(argv=None) -> int:
     ap.add_argument("--checkout-prefix", action="append", default=[], metavar="PREFIX",
                     help="an absolute checkout path to strip from generated files (repeatable)")
     ap.add_argument("--strip-issue-refs", action="store_true", help="remove planning-issue references (see above)")
+    ap.add_argument("--fix-wording", action="store_true", help="reword sentences about the old file (see above)")
     args = ap.parse_args(argv)
     root = args.root.resolve()
     files = tracked_files(root)
@@ -144,7 +160,7 @@ def main(argv=None) -> int:
         text = read_text(path)
         if text is None:
             continue
-        new, counts = rewrite(text, rel, tracked, args.checkout_prefix, args.strip_issue_refs)
+        new, counts = rewrite(text, rel, tracked, args.checkout_prefix, args.strip_issue_refs, args.fix_wording)
         if args.strip_issue_refs:
             for k, line in enumerate(new.splitlines(), start=1):
                 if ISSUE_LEFT.search(line):
