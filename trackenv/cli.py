@@ -281,9 +281,12 @@ def cmd_train(args) -> int:
                 run_dir=args.run_dir, resume=args.resume, progress_bar=not args.no_progress,
                 verbose=1 if args.verbose else 0, command=command)
     i = res.info
+    if i["final_mean_return"] is None:
+        outcome = "no episode finished during training (no mean return or success rate to report)"
+    else:
+        outcome = f"final mean return {i['final_mean_return']:.4g}, success {i['final_success_rate']:.2f}"
     print(f"{driver_name(task, terrain)} ({algo}, seed {args.seed}): {i['n_timesteps']} steps in {i['train_seconds']:.0f} s "
-          f"(env stepping {100 * i['env_step_share']:.0f}%); final mean return {i['final_mean_return']}, "
-          f"success {i['final_success_rate']}")
+          f"(env stepping {100 * i['env_step_share']:.0f}%); {outcome}")
     print(f"wrote {res.model_path} and {res.info_path}")
     return 0
 
