@@ -268,7 +268,7 @@ def check_keywords(task: str, task_kwargs: dict) -> None:
     if unknown:
         close = difflib.get_close_matches(unknown[0], accepted, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise TypeError(f"{task}: unknown keyword(s) {unknown}{hint}; accepted: {', '.join(accepted)}")
+        raise TypeError(f"{task}: unknown option(s) {unknown}{hint}; accepted: {', '.join(accepted)}")
 
 
 def _task_env(task_name: str, doc: str):
