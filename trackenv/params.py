@@ -9,7 +9,13 @@ The pytrees are :class:`equinox.Module` instances: their array leaves can be ``j
 say, the cohesion), while the few discrete choices (the shear law, the number of contact points)
 are static fields that select the compiled program.
 
-Units are SI; angles are stored in radians (the YAML files state degrees).
+Units are SI; angles are stored in radians (the YAML files state degrees). Each YAML key expects one
+unit; a value stated in another unit is converted through the declared :data:`UNIT_CONVERSIONS`
+(kPa -> Pa, rad -> deg, cm -> m, ...), and any other unit is a :class:`ConfigError` naming file and key.
+
+:data:`BOUNDS` is the one table of physical ranges: :func:`check_value` applies it when YAML is loaded,
+in :func:`replace`, to domain-randomisation ranges and (through :func:`validate_params`) in
+:func:`load_params`; effects check their own ``bounds`` when they are constructed.
 """
 
 from __future__ import annotations
