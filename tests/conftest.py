@@ -8,7 +8,8 @@ except ImportError:  # hypothesis is in the ``test`` extra; the property tests s
     pass
 else:
     common = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
-                  derandomize=False, print_blob=True)
-    settings.register_profile("ci", max_examples=8, **common)
+                  print_blob=True)
+    # ci: the same examples on every run (no flaky CI); thorough: new random examples each run
+    settings.register_profile("ci", max_examples=8, derandomize=True, database=None, **common)
     settings.register_profile("thorough", max_examples=200, **common)
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
