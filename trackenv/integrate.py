@@ -209,6 +209,29 @@ def advance_constant(state: State, voltage, params, dt, substeps: int, unroll: i
     return out, total
 
 
+# A state beyond these multiples of the drive's stall current and no-load speed (at the bus voltage)
+# is not a physical state of the vehicle but the start of a numerical blow-up: flag it at once rather
+# than after the numbers overflow.
+BOUND_FACTOR = 10.0
+
+
+def physical_bounds(params):
+    """Largest physical |current| [A] and |omega| [rad/s]: ``BOUND_FACTOR`` x the stall current
+    V_lim/R_m (4.2 at omega = 0) and the no-load speed V_lim/alpha_v (4.2 at i = 0)."""
+    veh = params.vehicle
+    return (BOUND_FACTOR * veh.voltage_limit / veh.motor_resistance,
+            BOUND_FACTOR * veh.voltage_limit / veh.alpha_v)
+
+
+def is_physical(state: State, params, nb: int):
+    """Per-vehicle flag, shape (*b): every component is finite and the motor currents and sprocket
+    speeds are within :func:`physical_bounds`."""
+    i_max, w_max = physical_bounds(params)
+    axes = tuple(range(state.current.ndim - nb))
+    bounded = (jnp.abs(state.current) <= i_max).all(axis=axes) & (jnp.abs(state.omega) <= w_max).all(axis=axes)
+    return is_finite(state, nb) & bounded
+
+
 def is_finite(state: State, nb: int):
     """Per-vehicle flag: every state component is finite; shape (*b)."""
     leaves = jax.tree.leaves(state)
