@@ -31,6 +31,7 @@ import numpy as np
 
 from . import instruments
 from .integrate import advance, is_physical
+from .parallel import shard, split_count
 from .physics.model import State, initial_state
 
 DEFAULT_DT = 0.05  # s, control / output interval
@@ -247,6 +248,10 @@ def simulate(
     if initial is None:
         initial = initial_state(params, batch)
     substeps = n_substeps(dt, substep)
+    if len(batch) == 1 and split_count(batch[0]) > 1:  # both cores: the vehicle axis split (parallel.py)
+        params, profile, initial = shard((params, profile, initial), batch[0], axis=-1)
+        profile = VoltageProfile(jax.device_put(profile.t, jax.sharding.NamedSharding(
+            profile.volts.sharding.mesh, jax.sharding.PartitionSpec())), profile.volts)
     traj = _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps)
     if on_divergence == "raise" and not isinstance(traj.diverged, jax.core.Tracer):
         div = np.asarray(traj.diverged)
