@@ -25,7 +25,7 @@ import jax.numpy as jnp
 
 from .physics.model import State, decay_rates, evaluate
 from .physics import contact
-from .physics.motor import current_decay_rate, friction_torque, internal_resistance_torque
+from .physics.motor import current_decay_rate, resistance_slope
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series
 _TAYLOR_TERMS = 12
@@ -110,19 +110,15 @@ def diagonal_damping(params, state: State, ev):
 
     """
     veh, kin = params.vehicle, ev.kin
-    # S_z depends on the slip only and S_x on v_y only: one JVP gives both factors and both slopes.
-    (sat_z, sat_x), (ds_z, ds_x) = jax.jvp(lambda s, v: contact.saturations(kin._replace(slip=s, lateral_velocity=v)),
-                                           (kin.slip, kin.lateral_velocity),
-                                           (jnp.ones_like(kin.slip), jnp.ones_like(kin.lateral_velocity)))
-    jz_sat, jx_sat = state.jz * sat_z, state.jx * sat_x
-    _, (dfl_dj, dflat_dj) = jax.jvp(
-        lambda a, b: contact.forces_from_saturated(params.terrain, kin.area, ev.forces.normal, a, b),
-        (jz_sat, jx_sat), (jnp.ones_like(jz_sat), jnp.ones_like(jx_sat)),
-    )
+    # Closed forms of the slopes (terramechanics/contact/motor *_slope), equal to forward-mode JVPs of
+    # the force laws (tests/test_damping.py) without re-tracing them.
+    sat_z, sat_x = contact.saturations(kin)
+    ds_z, ds_x = contact.saturation_slopes(kin)
+    dfl_dj, dflat_dj = contact.force_slopes(params.terrain, kin.area, ev.forces.normal,
+                                            state.jz * sat_z, state.jx * sat_x)
     dfl_ds = dfl_dj * state.jz * ds_z  # dF/ds = dF/dj' * j_z * dS/ds (chain rule through 3.17)
     dflat_dvy = dflat_dj * state.jx * ds_x
-    _, dtau_dw = jax.jvp(lambda w: friction_torque(veh, w) + internal_resistance_torque(params.internal, w),
-                         (state.omega,), (jnp.ones_like(state.omega),))
+    dtau_dw = resistance_slope(veh, params.internal, state.omega)
     traction = dfl_ds.sum(axis=1)  # (2, *b) dF_x,k/ds_k
     lam_w = (dtau_dw + kin.belt_radius**2 * traction) / veh.drive_inertia
     lam_u = traction.sum(axis=0) / veh.mass
