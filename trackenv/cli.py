@@ -372,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "give SOURCE before this option")
     r.add_argument("--internal-resistance", choices=("constant", "viscous"),
                    help="internal track resistance model (default: the test's; constant for logs)")
-    r.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP, help="integration substep [s] (default 0.001)")
+    r.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP, help="integration substep [s] (default 0.0005)")
     r.add_argument("--dt", type=float, default=0.05,
                    help="largest simulation output step [s] (default 0.05; finer for faster logs)")
     r.add_argument("--force", action="store_true",

@@ -179,7 +179,7 @@ def replay(
         terrain: terrain id overriding the log's ``meta.json`` / the test's terrain.
         internal_resistance: ``"constant"`` or ``"viscous"`` (default: the test's; ``constant`` for logs).
         effects: MODEL.md §8 effect ids (``trackenv.effects.EFFECT_IDS``, default parameters) or effect modules.
-        substep: integration substep [s] (default ``trackenv.simulate.DEFAULT_SUBSTEP``, 1 ms).
+        substep: integration substep [s] (default ``trackenv.simulate.DEFAULT_SUBSTEP``, 0.5 ms).
         dt: largest output step [s] of the simulation (default 0.05 s); see the module docstring.
         figure: write ``replay.png`` (the slowest output; ``False`` skips it).
         progress: called with a short status string at each stage (the CLI shows them).

@@ -12,7 +12,8 @@ Options (keyword arguments of ``gym.make``):
 - ``terrain``: any ``configs/terrain`` id (``dry_sand``, ``asphalt``, ``sandy_loam_1`` ...) or a YAML path;
 - ``effects``: ids of MODEL.md §8 (resolved through ``trackenv.effects``) or effect modules;
 - ``control_dt``: control step [s], default 0.05; ``substep``: largest integration substep [s],
-  default ``trackenv.envs.core.ENV_DEFAULT_SUBSTEP`` (1 ms: NRMSE <= 1.4% vs the reference, README);
+  default ``trackenv.envs.core.ENV_DEFAULT_SUBSTEP`` (the verified substep of ``simulate``, README),
+  at most ``control_dt`` and ``trackenv.simulate.MAX_SUBSTEP`` (else ``ValueError``);
 - ``domain_randomization``: ``False`` (default), ``True`` (default ranges) or a dict of ranges, see
   :mod:`trackenv.envs.randomization`;
 - ``normalize_action``: ``False`` (default, actions in volts) or ``True`` (actions in [-1, 1] times
