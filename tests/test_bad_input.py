@@ -296,10 +296,9 @@ case("effects='slip_sinkage', a string (one id, documented)", "env option", _eff
 case("unknown effect id", "env option",
      lambda t: call(lambda: gym.make("trackenv/GoStop-v0", effects=["slip_sinkag"])),
      expect_error(ValueError, "'slip_sinkag'", "slip_sinkage"))
-case("substep above the stable limit (needs the integrator's substep guard)", "env option",
+case("substep above the stable limit", "env option",
      lambda t: call(lambda: gym.make("trackenv/GoStop-v0", substep=0.03)),
-     expect_error(Exception, "substep"),
-     marks=pytest.mark.xfail(reason="the substep guard lands with the integrator work (speed branch)", strict=False))
+     expect_error(ValueError, "substep", "0.01"))
 case("negative control_dt", "env option",
      lambda t: call(lambda: gym.make("trackenv/GoStop-v0", control_dt=-0.05)),
      expect_error(ValueError, "control_dt"))
