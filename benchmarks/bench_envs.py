@@ -1,6 +1,6 @@
 """Speed of the Gymnasium environments: single env via ``gym.make`` and the batched VectorEnv.
 
-    python benchmarks/bench_envs.py                 # default substep; vector N = 1, 64, 1024
+    python benchmarks/bench_envs.py                 # default substep; vector N = 64, 1024, 4096
     python benchmarks/bench_envs.py --quick         # N = 1, 64 only, shorter runs
     python benchmarks/bench_envs.py --substeps 0.0005 0.001 0.002 0.005
     python benchmarks/bench_envs.py --sync-dispatch # jax_cpu_enable_async_dispatch = False (see below)
@@ -76,7 +76,7 @@ def main(argv=None):
     ap.add_argument("--substeps", type=float, nargs="*", default=None,
                     help=f"substeps [s] for the single-env table (default: {DEFAULT_SUBSTEP:g} and 0.001, 0.002, 0.005)")
     ap.add_argument("--vector-substep", type=float, default=DEFAULT_SUBSTEP)
-    ap.add_argument("--batching", nargs="*", default=["vmap", "native"], choices=["vmap", "native"])
+    ap.add_argument("--batching", nargs="*", default=["auto"], choices=["auto", "vmap", "native"])
     ap.add_argument("--seconds", type=float, default=3.0, help="timed seconds per measurement")
     ap.add_argument("--sync-dispatch", action="store_true",
                     help="set jax_cpu_enable_async_dispatch=False before JAX starts (see the module docstring)")
@@ -84,9 +84,10 @@ def main(argv=None):
     if args.sync_dispatch:
         jax.config.update("jax_cpu_enable_async_dispatch", False)
     subs = args.substeps or sorted({DEFAULT_SUBSTEP, 0.001, 0.002, 0.005})
-    sizes = (1, 64) if args.quick else (1, 64, 1024)
+    sizes = (1, 64) if args.quick else (64, 1024, 4096)
     secs = args.seconds / (2 if args.quick else 1)
-    print(f"machine: {platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].device_kind}, "
+    print(f"machine: {platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].device_kind} "
+          f"(vector envs split over them from {trackenv.parallel.MIN_PER_DEVICE} envs per device), "
           f"jax {jax.__version__}; float32; control_dt 0.05 s; go-stop on dry sand; default substep {DEFAULT_SUBSTEP * 1e3:g} ms; "
           f"{'synchronous' if args.sync_dispatch else 'asynchronous (default)'} CPU dispatch\n")
     print("Single env via gym.make (PassiveEnvChecker + OrderEnforcing wrappers included):\n")

@@ -1,45 +1,57 @@
-"""Speed of the simulator: simulated seconds per wall second, single and batched, with XLA's cost.
+"""Speed of the simulator: one trajectory, batches, compile time, kernels, FLOP rate, and scipy.
 
-    python benchmarks/bench_simulate.py            # full table (a few minutes on 2 cores)
-    python benchmarks/bench_simulate.py --quick    # smaller batches
+    python benchmarks/bench_simulate.py                  # full table (several minutes on 2 cores)
+    python benchmarks/bench_simulate.py --quick          # batches 64, 256 only
+    python benchmarks/bench_simulate.py --batches 1024 4096 --batch-t-end 1
 
-Prints a Markdown table for the README: compile time, wall time of a 10 s maneuver, real-time factor
-(simulated s / wall s, aggregated over the batch), XLA's FLOP count per substep and the achieved
-GFLOP/s beside the machine's measured peak (a large float32 matmul), and what bounds the step.
-Batches are run two ways: ``jax.vmap`` of the single-vehicle program, and the native layout with the
-vehicle index on the last axis of every array (MODEL.md §6), which needs no vmap.
+Prints Markdown tables for the README, every number from this one process run:
+
+- the compiled substep: fused kernels in the substep loop's body (XLA's optimised HLO), XLA's FLOP
+  count and the wall time per substep, for one vehicle and for a batch;
+- one 10 s go-stop on dry sand at the default substep (compile time, wall time, x real time), and
+  the same model as a plain numpy right-hand side (``numpy_model.py``, checked against the JAX
+  derivative) under ``scipy.integrate.solve_ivp`` (LSODA, rtol 1e-6) on the same voltage log;
+- batches (vehicles on the last axis, MODEL.md §6) through ``te.simulate``, which splits large
+  batches across the host devices (``trackenv.parallel``), and the same batch on one device;
+- GFLOP/s beside the machine's measured peak (a 2048^2 float32 matmul).
 """
 
 from __future__ import annotations
 
 import argparse
 import platform
+import re
+import sys
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import trackenv as te
+from trackenv import parallel
+from trackenv.integrate import current_coeffs, etdrk4_substep
 from trackenv.physics.model import initial_state
 from trackenv.simulate import DEFAULT_SUBSTEP, _simulate_jit, n_substeps
 
+sys.path.insert(0, str(Path(__file__).parent))
+import numpy_model  # noqa: E402
+
 T_END = 10.0
 DT = 0.05
+ROWS = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [6.0, 11.8, 11.8], [6.1, 0, 0], [T_END, 0, 0]], float)
 
 
 def go_stop_profile(batch: int | None):
-    rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [6.0, 11.8, 11.8], [6.1, 0, 0], [T_END, 0, 0]], float)
-    t, v = rows[:, 0], rows[:, 1:]
+    t, v = ROWS[:, 0], ROWS[:, 1:]
     if batch:  # one slightly different profile per vehicle, vehicles on the last axis
-        scale = np.linspace(0.8, 1.2, batch)
-        v = v[:, :, None] * scale[None, None, :]
+        v = v[:, :, None] * np.linspace(0.8, 1.2, batch)[None, None, :]
     return te.VoltageProfile.from_arrays(t, v)
 
 
 def timed(fn, repeat: int):
-    out = fn()
-    jax.block_until_ready(out)
+    jax.block_until_ready(fn())
     best = np.inf
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -51,97 +63,107 @@ def timed(fn, repeat: int):
 def peak_gflops(n: int = 2048, repeat: int = 5) -> float:
     a = jnp.ones((n, n), jnp.float32)
     f = jax.jit(lambda x: x @ x)
-    t = timed(lambda: f(a), repeat)
-    return 2 * n**3 / t / 1e9
+    return 2 * n**3 / timed(lambda: f(a), repeat) / 1e9
 
 
-def flops_of(compiled) -> float:
-    cost = compiled.cost_analysis()
-    if isinstance(cost, (list, tuple)):
-        cost = cost[0]
-    return float(cost.get("flops", float("nan"))) if cost else float("nan")
-
-
-def substep_flops(params, batch: tuple) -> float:
-    """XLA's FLOP count of one integration substep for ``batch`` vehicles (loops are not unrolled
-    by the cost model, so the count is taken on the substep itself)."""
-    from trackenv.integrate import current_coeffs, etdrk4_substep
-
+def substep_kernels(params, batch: tuple, n_loop: int):
+    """(fusions in the loop body, FLOP per substep, us per substep) of a loop of substeps."""
     h = DEFAULT_SUBSTEP
-    s0 = initial_state(params, batch)
-    v3 = jnp.full((3, 2) + batch, 11.8, jnp.float32)
-    f = jax.jit(lambda s, v: etdrk4_substep(s, v, params, h, current_coeffs(params, h)))
-    return flops_of(f.lower(s0, v3).compile())
+    s0 = jax.tree.map(lambda x: x + 0.01, initial_state(params, batch))
+    v3 = jnp.full((3, 2) + batch, 11.8, params.dtype)
+    one = jax.jit(lambda s, v: etdrk4_substep(s, v, params, h, current_coeffs(params, h))).lower(s0, v3).compile()
+    cost = one.cost_analysis()
+    cost = cost[0] if isinstance(cost, (list, tuple)) else cost
+    flops = float(cost.get("flops", np.nan)) if cost else np.nan
+    loop = jax.jit(lambda s, v: jax.lax.fori_loop(
+        0, n_loop, lambda _, x: etdrk4_substep(x, v, params, h, current_coeffs(params, h)), s))
+    comp = loop.lower(s0, v3).compile()
+    text = comp.as_text()
+    bodies = re.split(r"\n(?=\S)", text)
+    counts = [len(re.findall(r"= \S+ fusion\(", b)) for b in bodies]
+    wall = timed(lambda: comp(s0, v3), 3)
+    return max(counts), flops, wall / n_loop * 1e6
 
 
-def run(batches, repeat: int):
-    params = te.load_params("dry_sand")
-    substeps = n_substeps(DT, DEFAULT_SUBSTEP)
-    n_steps = int(round(T_END / DT))
-    rows = []
-
-    # single trajectory
-    prof = go_stop_profile(None)
-    s0 = initial_state(params)
+def scipy_seconds(params, t_end: float) -> float:
+    rhs = numpy_model.make_rhs(params, ROWS[:, 0], ROWS[:, 1:])
+    from scipy.integrate import solve_ivp
     t0 = time.perf_counter()
-    compiled = _simulate_jit.lower(params, prof, s0, n_steps=n_steps, dt=DT, substeps=substeps).compile()
-    compile_s = time.perf_counter() - t0
-    wall = timed(lambda: compiled(params, prof, s0), repeat)
-    rows.append(("single", 1, compile_s, wall, substep_flops(params, ())))
-
-    vsim = jax.jit(
-        jax.vmap(lambda p, s: _simulate_jit.__wrapped__(params, p, s, n_steps, DT, substeps), in_axes=(0, 0)),
-    )
-    for b in batches:
-        # native layout: vehicles on the last axis
-        prof_b = go_stop_profile(b)
-        s0_b = initial_state(params, (b,))
-        t0 = time.perf_counter()
-        comp_b = _simulate_jit.lower(params, prof_b, s0_b, n_steps=n_steps, dt=DT, substeps=substeps).compile()
-        c_b = time.perf_counter() - t0
-        wall_b = timed(lambda: comp_b(params, prof_b, s0_b), max(1, repeat // 2))
-        rows.append(("last-axis", b, c_b, wall_b, substep_flops(params, (b,))))
-        # jax.vmap of the single-vehicle program
-        prof_v = te.VoltageProfile(jnp.broadcast_to(prof.t, (b,) + prof.t.shape),
-                                   jnp.moveaxis(prof_b.volts, -1, 0))
-        s0_v = jax.tree.map(lambda x: jnp.broadcast_to(x, (b,) + x.shape), s0)
-        t0 = time.perf_counter()
-        comp_v = vsim.lower(prof_v, s0_v).compile()
-        c_v = time.perf_counter() - t0
-        wall_v = timed(lambda: comp_v(prof_v, s0_v), max(1, repeat // 2))
-        rows.append(("vmap", b, c_v, wall_v, substep_flops(params, (b,))))
-    return rows, substeps, n_steps
+    sol = solve_ivp(rhs, (0.0, t_end), np.zeros(66), method="LSODA", rtol=1e-6, atol=1e-9,
+                    t_eval=np.arange(0.0, t_end + 1e-9, DT))
+    wall = time.perf_counter() - t0
+    if sol.status != 0:
+        raise RuntimeError(f"LSODA failed: {sol.message}")
+    return wall
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="batches 1, 64 only")
-    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--quick", action="store_true", help="batches 64, 256 only")
+    ap.add_argument("--batches", type=int, nargs="*", default=None)
+    ap.add_argument("--batch-t-end", type=float, default=2.0, help="simulated seconds per batch run (first part of the go-stop)")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--no-scipy", action="store_true")
     args = ap.parse_args(argv)
-    batches = (1, 64) if args.quick else (1, 64, 256, 1024)
+    batches = args.batches if args.batches is not None else ((64, 256) if args.quick else (64, 256, 1024, 4096))
+    params = te.load_params("dry_sand")
+    substeps = n_substeps(DT, DEFAULT_SUBSTEP)
+    print(f"machine: {platform.processor() or platform.machine()}, {len(parallel.cpu_devices())} host devices "
+          f"(cores: {parallel._cores()}), jax {jax.__version__}; float32; substep {DT / substeps * 1e3:g} ms")
     peak = peak_gflops()
-    rows, substeps, n_steps = run(batches, args.repeat)
-    n_sub_total = substeps * n_steps
-    print(f"machine: {platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].device_kind}, "
-          f"jax {jax.__version__}; float32; substep {DT / substeps * 1e3:g} ms; maneuver {T_END:g} s go-stop on dry sand")
-    print(f"peak (2048^2 float32 matmul): {peak:.1f} GFLOP/s\n")
-    print("| layout | vehicles | compile s | wall s (10 s maneuver) | x real time (aggregate) | us / substep / vehicle | FLOP / substep / vehicle | GFLOP/s | % of peak |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for layout, b, c, w, fl in rows:
-        rt = T_END * b / w
-        per = w / n_sub_total / b * 1e6
-        fl_sub = fl / b
-        gf = fl * n_sub_total / w / 1e9
-        print(f"| {layout} | {b} | {c:.1f} | {w * 1e3:.1f} ms | {rt:,.0f} | {per:.2f} | {fl_sub:,.0f} | {gf:.2f} | {100 * gf / peak:.1f} |")
-    single = rows[0]
-    gf = single[4] * n_sub_total / single[3] / 1e9
-    print(
-        f"\nWhat bounds the step: a single vehicle does ~{single[4]:,.0f} FLOP per substep in "
-        f"{single[3] / n_sub_total * 1e6:.1f} us, i.e. {gf:.2f} GFLOP/s ({100 * gf / peak:.2f}% of peak): it is bound by "
-        "per-kernel dispatch inside XLA's loop (about 56 small fused kernels per substep on (2, 14) arrays), "
-        "not by arithmetic or memory. Batching amortises that overhead until the per-substep working set "
-        "leaves the caches."
-    )
+    print(f"peak (2048^2 float32 matmul, one core): {peak:.1f} GFLOP/s\n")
+
+    # the compiled substep
+    print("| substep loop | fused kernels in the loop body | FLOP / substep / vehicle | us / substep | us / substep / vehicle | GFLOP/s | % of peak |")
+    print("|---|---|---|---|---|---|---|")
+    for batch, n_loop in (((), 2000), ((256,), 50)):
+        nf, fl, us = substep_kernels(params, batch, n_loop)
+        b = batch[0] if batch else 1
+        gf = fl / us / 1e3
+        print(f"| {b} vehicle{'s' if b > 1 else ''} | {nf} | {fl / b:,.0f} | {us:.2f} | {us / b:.3f} | {gf:.2f} | {100 * gf / peak:.1f} |")
+
+    # one trajectory, and scipy on the same log
+    n_steps = int(round(T_END / DT))
+    prof = go_stop_profile(None)
+    s0 = initial_state(params)
+    t0 = time.perf_counter()
+    comp = _simulate_jit.lower(params, prof, s0, n_steps=n_steps, dt=DT, substeps=substeps).compile()
+    compile_s = time.perf_counter() - t0
+    wall = timed(lambda: comp(params, prof, s0), args.repeat)
+    print(f"\none trajectory (10 s go-stop, dry sand): compile {compile_s:.1f} s, wall {wall * 1e3:.1f} ms, "
+          f"{T_END / wall:.0f}x real time, {wall / (n_steps * substeps) * 1e6:.2f} us / substep")
+    if not args.no_scipy:
+        err = numpy_model.check(params)
+        sp = scipy_seconds(params, T_END)
+        print(f"numpy RHS (max relative deviation from the JAX derivative {err:.1e}) under scipy solve_ivp LSODA "
+              f"(rtol 1e-6, atol 1e-9): {sp:.2f} s, {T_END / sp:.1f}x real time; trackenv is {sp / wall:.1f}x faster")
+
+    # batches
+    print(f"\n| vehicles | split over devices | compile s | wall s ({args.batch_t_end:g} s simulated) | x real time (aggregate) "
+          f"| us / substep / vehicle | one device: x real time | split / one device |")
+    print("|---|---|---|---|---|---|---|---|")
+    for b in batches:
+        prof_b = go_stop_profile(b)
+        run = lambda: te.simulate(params, prof_b, args.batch_t_end, dt=DT, on_divergence="flag").channels  # noqa: E731
+        t0 = time.perf_counter()
+        jax.block_until_ready(run())
+        first = time.perf_counter() - t0
+        rep = 1 if b >= 1024 else args.repeat
+        w = timed(run, rep)
+        split = parallel.split_count(b)
+        per = w / (args.batch_t_end / DT * substeps) / b * 1e6
+        if split > 1:
+            keep = parallel.MIN_PER_DEVICE
+            parallel.MIN_PER_DEVICE = 10**12
+            try:
+                w1 = timed(run, rep)
+            finally:
+                parallel.MIN_PER_DEVICE = keep
+            one = f"{args.batch_t_end * b / w1:,.0f} | {w1 / w:.2f}"
+        else:
+            one = "(same) | 1"
+        print(f"| {b} | {split} | {first - w:.1f} | {w:.2f} | {args.batch_t_end * b / w:,.0f} | {per:.3f} | {one} |", flush=True)
+    print("\n(compile s of a batch: first call minus a timed call.)")
 
 
 if __name__ == "__main__":

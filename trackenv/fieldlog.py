@@ -54,6 +54,7 @@ import pandas as pd
 
 __all__ = [
     "FieldLogError",
+    "FieldLogWarning",
     "FieldLog",
     "read_field_log",
     "write_field_log",
@@ -80,6 +81,17 @@ _MISSING = ("", "nan", "na", "n/a", "null", "none")
 
 class FieldLogError(ValueError):
     """A field log is missing or invalid; the message names the file, and the column and row."""
+
+
+class FieldLogWarning(UserWarning):
+    """A field log is valid but suspicious (e.g. a long gap between samples); the message names file and row."""
+
+
+# A sample interval longer than GAP_FACTOR x the log's median interval and longer than GAP_MIN_S is reported
+# with a FieldLogWarning (a logger that stopped, or a time column in the wrong unit): replay interpolates the
+# voltages linearly across it.
+GAP_FACTOR = 100.0
+GAP_MIN_S = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -255,10 +267,21 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
             raise FieldLogError(f"{path}: line 1 (header): column '{name}' appears twice")
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
+        hint = ""
+        for sep in (";", "\t", "|"):
+            if len(header) == 1 and sep in header[0]:
+                name = "tab" if sep == "\t" else repr(sep)
+                hint = (f"; the header looks {name}-delimited ({header[0][:60]!r}): log.csv must be comma-separated")
+                break
+        if not hint:
+            lower = {h.lower(): h for h in header}
+            found = [f"{lower[c]!r} for {c!r}" for c in missing if c in lower]
+            if found:
+                hint = f"; column names are case-sensitive (lower case): found {', '.join(found)}"
         raise FieldLogError(
             f"{path}: line 1 (header): missing required column(s) {', '.join(repr(c) for c in missing)} "
             f"(required: {','.join(REQUIRED_COLUMNS)}; a channel that was not logged stays in the header with "
-            f"empty cells)")
+            f"empty cells){hint}")
     if len(rows) < 2:
         raise FieldLogError(f"{path}: column 't': {len(rows)} data row(s); a log needs at least 2 samples")
 
@@ -293,8 +316,19 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
     if np.any(dt <= 0):
         k = int(np.flatnonzero(dt <= 0)[0]) + 1
         kind = "duplicate time" if dt[k - 1] == 0 else "time goes backwards"
-        raise FieldLogError(f"{where('t', k)}: t = {t[k]!r} s is not greater than t = {t[k - 1]!r} s at line "
+        raise FieldLogError(f"{where('t', k)}: t = {t[k]:.15g} s is not greater than t = {t[k - 1]:.15g} s at line "
                             f"{line[k - 1]} ({kind}); t must be strictly increasing")
+    if dt.size >= 1:
+        med = float(np.median(dt))
+        gaps = np.flatnonzero((dt > GAP_FACTOR * med) & (dt > GAP_MIN_S))
+        if gaps.size:
+            import warnings
+
+            k = int(gaps[0]) + 1
+            warnings.warn(f"{where('t', k)}: a gap of {dt[k - 1]:.6g} s after t = {t[k - 1]:.15g} s (line "
+                          f"{line[k - 1]}), {dt[k - 1] / med:.0f}x the median sample interval {med:.6g} s"
+                          f"{f' ({gaps.size} such gaps)' if gaps.size > 1 else ''}; replay interpolates the "
+                          "voltages linearly across it", FieldLogWarning, stacklevel=3)
     limit = _voltage_limit(meta["vehicle"])
     for col in ("v_left", "v_right"):
         over = np.abs(df[col].to_numpy()) > limit + 1e-9

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 
 from .physics.model import State, decay_rates, evaluate
 from .physics import contact
-from .physics.motor import current_decay_rate, friction_torque, internal_resistance_torque
+from .physics.motor import current_decay_rate, resistance_slope
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series
 _TAYLOR_TERMS = 12
@@ -110,19 +110,15 @@ def diagonal_damping(params, state: State, ev):
 
     """
     veh, kin = params.vehicle, ev.kin
-    # S_z depends on the slip only and S_x on v_y only: one JVP gives both factors and both slopes.
-    (sat_z, sat_x), (ds_z, ds_x) = jax.jvp(lambda s, v: contact.saturations(kin._replace(slip=s, lateral_velocity=v)),
-                                           (kin.slip, kin.lateral_velocity),
-                                           (jnp.ones_like(kin.slip), jnp.ones_like(kin.lateral_velocity)))
-    jz_sat, jx_sat = state.jz * sat_z, state.jx * sat_x
-    _, (dfl_dj, dflat_dj) = jax.jvp(
-        lambda a, b: contact.forces_from_saturated(params.terrain, kin.area, ev.forces.normal, a, b),
-        (jz_sat, jx_sat), (jnp.ones_like(jz_sat), jnp.ones_like(jx_sat)),
-    )
+    # Closed forms of the slopes (terramechanics/contact/motor *_slope), equal to forward-mode JVPs of
+    # the force laws (tests/test_damping.py) without re-tracing them.
+    sat_z, sat_x = contact.saturations(kin)
+    ds_z, ds_x = contact.saturation_slopes(kin)
+    dfl_dj, dflat_dj = contact.force_slopes(params.terrain, kin.area, ev.forces.normal,
+                                            state.jz * sat_z, state.jx * sat_x)
     dfl_ds = dfl_dj * state.jz * ds_z  # dF/ds = dF/dj' * j_z * dS/ds (chain rule through 3.17)
     dflat_dvy = dflat_dj * state.jx * ds_x
-    _, dtau_dw = jax.jvp(lambda w: friction_torque(veh, w) + internal_resistance_torque(params.internal, w),
-                         (state.omega,), (jnp.ones_like(state.omega),))
+    dtau_dw = resistance_slope(veh, params.internal, state.omega)
     traction = dfl_ds.sum(axis=1)  # (2, *b) dF_x,k/ds_k
     lam_w = (dtau_dw + kin.belt_radius**2 * traction) / veh.drive_inertia
     lam_u = traction.sum(axis=0) / veh.mass
@@ -207,6 +203,29 @@ def advance_constant(state: State, voltage, params, dt, substeps: int, unroll: i
     f0 = integrand(state) if integrand_start is None else integrand_start
     out, _, total = jax.lax.fori_loop(0, substeps, body, (state, f0, jnp.zeros_like(f0)), unroll=unroll)
     return out, total
+
+
+# A state beyond these multiples of the drive's stall current and no-load speed (at the bus voltage)
+# is not a physical state of the vehicle but the start of a numerical blow-up: flag it at once rather
+# than after the numbers overflow.
+BOUND_FACTOR = 10.0
+
+
+def physical_bounds(params):
+    """Largest physical |current| [A] and |omega| [rad/s]: ``BOUND_FACTOR`` x the stall current
+    V_lim/R_m (4.2 at omega = 0) and the no-load speed V_lim/alpha_v (4.2 at i = 0)."""
+    veh = params.vehicle
+    return (BOUND_FACTOR * veh.voltage_limit / veh.motor_resistance,
+            BOUND_FACTOR * veh.voltage_limit / veh.alpha_v)
+
+
+def is_physical(state: State, params, nb: int):
+    """Per-vehicle flag, shape (*b): every component is finite and the motor currents and sprocket
+    speeds are within :func:`physical_bounds`."""
+    i_max, w_max = physical_bounds(params)
+    axes = tuple(range(state.current.ndim - nb))
+    bounded = (jnp.abs(state.current) <= i_max).all(axis=axes) & (jnp.abs(state.omega) <= w_max).all(axis=axes)
+    return is_finite(state, nb) & bounded
 
 
 def is_finite(state: State, nb: int):

@@ -9,7 +9,13 @@ The pytrees are :class:`equinox.Module` instances: their array leaves can be ``j
 say, the cohesion), while the few discrete choices (the shear law, the number of contact points)
 are static fields that select the compiled program.
 
-Units are SI; angles are stored in radians (the YAML files state degrees).
+Units are SI; angles are stored in radians (the YAML files state degrees). Each YAML key expects one
+unit; a value stated in another unit is converted through the declared :data:`UNIT_CONVERSIONS`
+(kPa -> Pa, rad -> deg, cm -> m, ...), and any other unit is a :class:`ConfigError` naming file and key.
+
+:data:`BOUNDS` is the one table of physical ranges: :func:`check_value` applies it when YAML is loaded,
+in :func:`replace`, to domain-randomisation ranges and (through :func:`validate_params`) in
+:func:`load_params`; effects check their own ``bounds`` when they are constructed.
 """
 
 from __future__ import annotations
@@ -120,27 +126,92 @@ class Params(eqx.Module):
 # ----------------------------------------------------------------------------------------------
 # loading and validation
 
-_VEHICLE_KEYS = {
-    # key: (attribute, lower bound, strict)
-    "mass": ("mass", 0.0, True),
-    "yaw_inertia": ("yaw_inertia", 0.0, True),
-    "cg_height": ("cg_height", 0.0, False),
-    "track_gauge": ("track_gauge", 0.0, True),
-    "contact_length": ("contact_length", 0.0, True),
-    "track_width": ("track_width", 0.0, True),
-    "sprocket_radius": ("sprocket_radius", 0.0, True),
-    "grouser_height": ("grouser_height", 0.0, False),
-    "gear_ratio": ("gear_ratio", 0.0, True),
-    "torque_constant": ("torque_constant", 0.0, True),
-    "speed_constant": ("back_emf_constant", 0.0, True),  # converted from rpm/V
-    "motor_inductance": ("motor_inductance", 0.0, True),
-    "motor_resistance": ("motor_resistance", 0.0, True),
-    "drive_inertia": ("drive_inertia", 0.0, True),
-    "drive_damping": ("drive_damping", 0.0, False),
-    "stiction_torque": ("stiction_torque", 0.0, False),
-    "voltage_limit": ("voltage_limit", 0.0, True),
-    "n_contact": ("n_contact", 2.0, False),
+# One bounds table, one owner: every parameter of :class:`Params` that has a physical range, by its dotted
+# path, in the units it is stored in (SI, angles in rad). YAML loading, :func:`replace`, domain-randomisation
+# ranges (``trackenv.envs.randomization``) and the effect constructors (their own ``bounds``) all check values
+# through :func:`check_value`.
+# path: (lower, lower strict, upper, upper strict)
+BOUNDS: dict[str, tuple[float | None, bool, float | None, bool]] = {
+    "vehicle.mass": (0.0, True, None, False),
+    "vehicle.yaw_inertia": (0.0, True, None, False),
+    "vehicle.cg_height": (0.0, False, None, False),
+    "vehicle.track_gauge": (0.0, True, None, False),
+    "vehicle.contact_length": (0.0, True, None, False),
+    "vehicle.track_width": (0.0, True, None, False),
+    "vehicle.sprocket_radius": (0.0, True, None, False),
+    "vehicle.grouser_height": (0.0, False, None, False),
+    "vehicle.gear_ratio": (0.0, True, None, False),
+    "vehicle.torque_constant": (0.0, True, None, False),
+    "vehicle.back_emf_constant": (0.0, True, None, False),
+    "vehicle.motor_inductance": (0.0, True, None, False),
+    "vehicle.motor_resistance": (0.0, True, None, False),
+    "vehicle.drive_inertia": (0.0, True, None, False),
+    "vehicle.drive_damping": (0.0, False, None, False),
+    "vehicle.stiction_torque": (0.0, False, None, False),
+    "vehicle.voltage_limit": (0.0, True, None, False),
+    "vehicle.n_contact": (2.0, False, None, False),
+    "terrain.deformable": (0.0, False, 1.0, False),
+    "terrain.cohesion": (0.0, False, None, False),
+    "terrain.friction_angle": (0.0, False, math.pi / 2, True),
+    "terrain.shear_modulus": (0.0, True, None, False),
+    "terrain.sinkage_exponent": (0.0, True, None, False),
+    "terrain.k_c": (0.0, False, None, False),
+    "terrain.k_phi": (0.0, False, None, False),
+    "terrain.residual_ratio": (0.0, True, None, False),
+    "internal.constant": (0.0, False, None, False),
+    "internal.viscous": (0.0, False, None, False),
 }
+
+# YAML key -> (Params path, the unit the YAML value is stated in). Values given in another unit are
+# converted through UNIT_CONVERSIONS; an unknown or incompatible unit is an error naming file and key.
+_VEHICLE_KEYS = {
+    "mass": ("vehicle.mass", "kg"),
+    "yaw_inertia": ("vehicle.yaw_inertia", "kg m^2"),
+    "cg_height": ("vehicle.cg_height", "m"),
+    "track_gauge": ("vehicle.track_gauge", "m"),
+    "contact_length": ("vehicle.contact_length", "m"),
+    "track_width": ("vehicle.track_width", "m"),
+    "sprocket_radius": ("vehicle.sprocket_radius", "m"),
+    "grouser_height": ("vehicle.grouser_height", "m"),
+    "gear_ratio": ("vehicle.gear_ratio", "-"),
+    "torque_constant": ("vehicle.torque_constant", "N m/A"),
+    "speed_constant": ("vehicle.back_emf_constant", "rpm/V"),  # converted to V s/rad
+    "motor_inductance": ("vehicle.motor_inductance", "H"),
+    "motor_resistance": ("vehicle.motor_resistance", "ohm"),
+    "drive_inertia": ("vehicle.drive_inertia", "kg m^2"),
+    "drive_damping": ("vehicle.drive_damping", "N m s/rad"),
+    "stiction_torque": ("vehicle.stiction_torque", "N m"),
+    "voltage_limit": ("vehicle.voltage_limit", "V"),
+    "n_contact": ("vehicle.n_contact", "-"),
+}
+_TERRAIN_KEYS = {
+    "cohesion": ("terrain.cohesion", "Pa"),
+    "friction_angle": ("terrain.friction_angle", "deg"),  # stored in rad
+    "shear_modulus": ("terrain.shear_modulus", "m"),
+    "sinkage_exponent": ("terrain.sinkage_exponent", "-"),
+    "k_c": ("terrain.k_c", "N/m^(n+1)"),
+    "k_phi": ("terrain.k_phi", "N/m^(n+2)"),
+    "residual_ratio": ("terrain.residual_ratio", "-"),
+    "internal_resistance_constant": ("internal.constant", "N m"),
+    "internal_resistance_viscous": ("internal.viscous", "N m s/rad"),
+}
+
+# The declared unit conversions: (unit written in the file, unit expected) -> factor (value x factor).
+UNIT_CONVERSIONS: dict[tuple[str, str], float] = {
+    ("kPa", "Pa"): 1e3,
+    ("MPa", "Pa"): 1e6,
+    ("rad", "deg"): 180.0 / math.pi,
+    ("cm", "m"): 1e-2,
+    ("mm", "m"): 1e-3,
+    ("in", "m"): 0.0254,
+    ("g", "kg"): 1e-3,
+    ("lb", "kg"): 0.45359237,
+    ("mH", "H"): 1e-3,
+    ("mohm", "ohm"): 1e-3,
+    ("kN/m^(n+1)", "N/m^(n+1)"): 1e3,
+    ("kN/m^(n+2)", "N/m^(n+2)"): 1e3,
+}
+_DIMENSIONLESS = ("-", "", "1")
 
 _TERRAIN_REQUIRED = {
     "deformable",
@@ -154,6 +225,98 @@ _TERRAIN_REQUIRED = {
 _TERRAIN_DEFORMABLE = {"sinkage_exponent", "k_c", "k_phi"}
 _TERRAIN_OPTIONAL = {"residual_ratio"}
 _SHEAR_LAWS = ("janosi", "wong_hump", "wong_peak")
+
+
+def _norm_unit(unit: str) -> str:
+    u = " ".join(str(unit).replace("\u00b7", " ").replace("*", " ").split())
+    return "-" if u in _DIMENSIONLESS else u
+
+
+def convert_unit(value: float, unit: Any, expected: str, where: str) -> float:
+    """``value`` stated in ``unit`` expressed in ``expected`` (the declared :data:`UNIT_CONVERSIONS`).
+
+    ``unit`` ``None`` means the expected unit. Unknown or incompatible units raise :class:`ConfigError`
+    naming ``where`` (file and key).
+    """
+    if unit is None:
+        return value
+    if not isinstance(unit, str):
+        raise ConfigError(f"{where}: unit must be a string such as {expected!r}, got {unit!r}")
+    u, e = _norm_unit(unit), _norm_unit(expected)
+    if u == e:
+        return value
+    factor = UNIT_CONVERSIONS.get((u, e))
+    if factor is None:
+        known = sorted(a for a, b in UNIT_CONVERSIONS if b == e)
+        alt = f" or {', '.join(known)} (converted)" if known else ""
+        raise ConfigError(f"{where}: unit {unit!r} is unknown or incompatible; expected {expected!r}{alt}")
+    return value * factor
+
+
+def fmt_num(x: Any) -> str:
+    """A number as plain text for messages (``1``, ``0.25``, ``-5``; never ``np.float64(1.0)``)."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    return f"{v:.10g}"
+
+
+def _bound_text(lo, lo_strict, hi, hi_strict, scale: float = 1.0, unit: str = "") -> str:
+    parts = []
+    u = f" {unit}" if unit and unit != "-" else ""
+    if lo is not None:
+        parts.append(f"{'>' if lo_strict else '>='} {fmt_num(lo * scale)}{u}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_strict else '<='} {fmt_num(hi * scale)}{u}")
+    return " and ".join(parts)
+
+
+def _is_concrete(value) -> bool:
+    return not isinstance(value, jax.core.Tracer)
+
+
+def check_value(path: str, value: Any, where: str = "", *, label: str | None = None,
+                display: tuple[float, str] = (1.0, "")) -> None:
+    """Check ``value`` (a number or an array of them, in stored units) against :data:`BOUNDS` [``path``].
+
+    Raises :class:`ConfigError` naming ``where`` (a file, or empty) and ``label`` (default: ``parameter
+    'path'``). Traced values (inside ``jit``/``grad``) are not checked. ``display`` = (factor, unit) shows
+    the value and bounds in another unit (e.g. degrees for the friction angle).
+    """
+    if path not in BOUNDS or not _is_concrete(value):
+        return
+    lo, lo_strict, hi, hi_strict = BOUNDS[path]
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where + ': ' if where else ''}{label or f'parameter {path!r}'} must be a number, "
+                          f"got {value!r}") from None
+    flat = arr.reshape(-1)
+    bad = ~np.isfinite(flat)
+    if lo is not None:
+        bad |= (flat <= lo) if lo_strict else (flat < lo)
+    if hi is not None:
+        bad |= (flat >= hi) if hi_strict else (flat > hi)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        scale, unit = display
+        v = flat[k]
+        what = label or f"parameter {path!r}"
+        at = f" (element {k})" if arr.ndim else ""
+        u = f" {unit}" if unit and unit != "-" else ""
+        if not math.isfinite(v):
+            msg = f"{what} = {fmt_num(v)}{at} must be finite"
+        else:
+            msg = (f"{what} = {fmt_num(v * scale)}{u}{at} is non-physical (must be "
+                   f"{_bound_text(lo, lo_strict, hi, hi_strict, scale, unit)})")
+        raise ConfigError(f"{where}: {msg}" if where else msg)
+
+
+def check_range(path: str, low: float, high: float, where: str = "") -> None:
+    """Both ends of a range [low, high] of ``path`` inside its bounds (see :func:`check_value`)."""
+    for v in (low, high):
+        check_value(path, v, where, label=f"range ({fmt_num(low)}, {fmt_num(high)}) of parameter {path!r}: end")
 
 
 def _read_yaml(path: Path) -> dict:
@@ -180,18 +343,25 @@ def _entry(path: Path, data: dict, key: str) -> Any:
     return entry["value"]
 
 
-def _number(path: Path, key: str, value: Any, lower: float | None = None, strict: bool = True,
-            upper: float | None = None) -> float:
+def _entry_si(path: Path, data: dict, key: str, expected_unit: str) -> Any:
+    """The entry's value converted from its stated ``unit`` to ``expected_unit`` (numbers only)."""
+    value = _entry(path, data, key)
+    unit = data[key].get("unit")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return value  # _number reports it
+    return convert_unit(float(value), unit, expected_unit, f"{path}: key '{key}'")
+
+
+def _number(path: Path, key: str, value: Any, param: str | None = None, display: tuple[float, str] = (1.0, ""),
+            to_stored: float = 1.0) -> float:
+    """A finite number from the file, checked against :data:`BOUNDS` [``param``] after ``x to_stored``."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ConfigError(f"{path}: key '{key}' must be a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
-        raise ConfigError(f"{path}: key '{key}' must be finite, got {value}")
-    if lower is not None and (value <= lower if strict else value < lower):
-        rel = ">" if strict else ">="
-        raise ConfigError(f"{path}: key '{key}' = {value} is non-physical (must be {rel} {lower})")
-    if upper is not None and value >= upper:
-        raise ConfigError(f"{path}: key '{key}' = {value} is non-physical (must be < {upper})")
+        raise ConfigError(f"{path}: key '{key}' must be finite, got {fmt_num(value)}")
+    if param is not None:
+        check_value(param, value * to_stored, str(path), label=f"key '{key}'", display=display)
     return value
 
 
@@ -233,13 +403,15 @@ def load_vehicle(name_or_path: str | Path = "packbot", dtype=jnp.float32) -> Veh
     data = _read_yaml(path)
     _check_keys(path, data, set(_VEHICLE_KEYS), set(_VEHICLE_KEYS))
     kwargs: dict[str, Any] = {}
-    for key, (attr, lower, strict) in _VEHICLE_KEYS.items():
-        value = _number(path, key, _entry(path, data, key), lower, strict)
+    for key, (param, unit) in _VEHICLE_KEYS.items():
+        attr = param.split(".", 1)[1]
+        value = _number(path, key, _entry_si(path, data, key, unit), None if key == "speed_constant" else param)
         if key == "speed_constant":
+            check_value("vehicle.back_emf_constant", value, str(path), label=f"key '{key}'")  # > 0 in rpm/V too
             value = 60.0 / (2.0 * math.pi * value)  # rpm/V -> V s/rad (back-emf constant)
         if key == "n_contact":
             if value != int(value):
-                raise ConfigError(f"{path}: key 'n_contact' must be an integer, got {value}")
+                raise ConfigError(f"{path}: key 'n_contact' must be an integer, got {fmt_num(value)}")
             kwargs[attr] = int(value)
         else:
             kwargs[attr] = jnp.asarray(value, dtype)
@@ -262,25 +434,31 @@ def load_terrain(name_or_path: str | Path = "dry_sand", dtype=jnp.float32) -> tu
     law = _entry(path, data, "shear_law")
     if law not in _SHEAR_LAWS:
         raise ConfigError(f"{path}: key 'shear_law' = {law!r} is not one of {_SHEAR_LAWS}")
-    num = lambda key, lo, strict=True, hi=None: _number(path, key, _entry(path, data, key), lo, strict, hi)  # noqa: E731
-    phi_deg = num("friction_angle", 0.0, False, 90.0)
+    def num(key):
+        param, unit = _TERRAIN_KEYS[key]
+        if key == "friction_angle":  # stated in degrees, bounds in rad
+            return _number(path, key, _entry_si(path, data, key, unit), param, (180.0 / math.pi, "deg"),
+                           math.pi / 180.0)
+        return _number(path, key, _entry_si(path, data, key, unit), param)
+
+    phi_deg = num("friction_angle")
     if deformable:
-        n = num("sinkage_exponent", 0.0)
-        k_c = num("k_c", 0.0, False)
-        k_phi = num("k_phi", 0.0, False)
+        n = num("sinkage_exponent")
+        k_c = num("k_c")
+        k_phi = num("k_phi")
         if k_c == 0.0 and k_phi == 0.0:
             raise ConfigError(f"{path}: keys 'k_c', 'k_phi' are both 0: the Bekker modulus k must be > 0")
     else:  # unused on hard ground (compaction is switched off); harmless placeholders
         n, k_c, k_phi = 1.0, 0.0, 1.0
-    residual = num("residual_ratio", 0.0) if "residual_ratio" in data else 0.5
+    residual = num("residual_ratio") if "residual_ratio" in data else 0.5
     if law == "wong_hump" and "residual_ratio" not in data:
         raise ConfigError(f"{path}: shear_law 'wong_hump' (2.11) needs key 'residual_ratio' (K_r)")
     f = lambda v: jnp.asarray(v, dtype)  # noqa: E731
     terrain = Terrain(
         deformable=f(1.0 if deformable else 0.0),
-        cohesion=f(num("cohesion", 0.0, False)),
+        cohesion=f(num("cohesion")),
         friction_angle=f(math.radians(phi_deg)),
-        shear_modulus=f(num("shear_modulus", 0.0)),
+        shear_modulus=f(num("shear_modulus")),
         sinkage_exponent=f(n),
         k_c=f(k_c),
         k_phi=f(k_phi),
@@ -288,8 +466,8 @@ def load_terrain(name_or_path: str | Path = "dry_sand", dtype=jnp.float32) -> tu
         shear_law=law,
     )
     internal = {
-        "constant": num("internal_resistance_constant", 0.0, False),
-        "viscous": num("internal_resistance_viscous", 0.0, False),
+        "constant": num("internal_resistance_constant"),
+        "viscous": num("internal_resistance_viscous"),
     }
     return terrain, internal
 
@@ -328,7 +506,7 @@ def load_params(
         ir = InternalResistance(constant=jnp.asarray(internal["constant"], dtype), viscous=zero)
     else:
         ir = InternalResistance(constant=zero, viscous=jnp.asarray(internal["viscous"], dtype))
-    return Params(vehicle=veh, terrain=ter, internal=ir, effects=tuple(effects))
+    return validate_params(Params(vehicle=veh, terrain=ter, internal=ir, effects=tuple(effects)))
 
 
 def replace(params: Params, **changes: Any) -> Params:
@@ -351,7 +529,25 @@ def replace(params: Params, **changes: Any) -> Params:
                 p = getattr(p, part)
             return p
 
+        check_value(dotted, value)  # the bounds table (concrete values; traced ones are not checked)
         params = eqx.tree_at(where, params, jnp.asarray(value, node.dtype))
+    return params
+
+
+def validate_params(params: Params, where: str = "") -> Params:
+    """Check every bounded leaf of ``params`` (:data:`BOUNDS`) and every effect's ``bounds``; return it.
+
+    Raises :class:`ConfigError` naming the parameter (and ``where``). Traced leaves are skipped.
+    """
+    for path in BOUNDS:
+        node = params
+        for part in path.split("."):
+            node = getattr(node, part)
+        check_value(path, node, where)
+    for eff in params.effects:
+        check = getattr(eff, "check_bounds", None)
+        if check is not None:
+            check()
     return params
 
 

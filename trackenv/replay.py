@@ -47,6 +47,7 @@ from typing import Any, Callable, Literal
 import numpy as np
 
 from .fieldlog import FieldLog, FieldLogError, read_field_log, write_field_log, write_log_columns
+from .outputs import prepare_output_dir
 from .simulate import DEFAULT_DT, DEFAULT_SUBSTEP
 
 __all__ = ["replay", "ReplayResult", "resolve_effects", "is_thesis_test", "RECONSTRUCTED_NOTE"]
@@ -165,6 +166,7 @@ def replay(
     dt: float = DEFAULT_DT,
     figure: bool = True,
     progress: Callable[[str], None] | None = None,
+    force: bool = False,
 ) -> ReplayResult:
     """Replay a field log folder or a thesis test id through the simulator; write log, figure, metrics.
 
@@ -177,14 +179,17 @@ def replay(
         terrain: terrain id overriding the log's ``meta.json`` / the test's terrain.
         internal_resistance: ``"constant"`` or ``"viscous"`` (default: the test's; ``constant`` for logs).
         effects: MODEL.md §8 effect ids (``trackenv.effects.EFFECT_IDS``, default parameters) or effect modules.
-        substep: integration substep [s] (default ``trackenv.simulate.DEFAULT_SUBSTEP``, 1 ms).
+        substep: integration substep [s] (default ``trackenv.simulate.DEFAULT_SUBSTEP``, 0.5 ms).
         dt: largest output step [s] of the simulation (default 0.05 s); see the module docstring.
         figure: write ``replay.png`` (the slowest output; ``False`` skips it).
         progress: called with a short status string at each stage (the CLI shows them).
+        force: write into ``out_dir`` even if it holds a field log that trackenv did not write
+            (:func:`trackenv.outputs.prepare_output_dir`; never into the input log's own folder).
 
     Raises:
         FieldLogError: bad log folder (message names file, column and row).
         ConfigError: unknown terrain, vehicle or effect id.
+        OutputFolderError: ``out_dir`` is a file or holds a field log trackenv did not write.
         SimulationDiverged: the simulation went non-finite.
     """
     from .params import ConfigError
@@ -192,15 +197,16 @@ def replay(
     say = progress or (lambda msg: None)
     substep = DEFAULT_SUBSTEP if substep is None else float(substep)
     if not (substep > 0 and math.isfinite(substep)):
-        raise ValueError(f"substep must be a positive number of seconds, got {substep!r}")
+        raise ValueError(f"substep must be a positive number of seconds, got {substep}")
     if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        raise ValueError(f"dt must be a positive number of seconds, got {dt}")
     if internal_resistance not in (None, "constant", "viscous"):
         raise ConfigError(f"internal_resistance must be 'constant' or 'viscous', got {internal_resistance!r}")
     effect_modules = resolve_effects(effects)
     effect_names = [e if isinstance(e, str) else type(e).__name__ for e in (effects or ())]
     out = Path(out_dir)
     if is_thesis_test(source):
+        prepare_output_dir(out, "replay", force=force)
         return _replay_thesis(str(source), out, terrain, internal_resistance, effect_modules, effect_names, substep,
                               dt, figure, say)
     if isinstance(source, str) and not Path(source).exists() and "/" not in source and "\\" not in source:
@@ -209,11 +215,11 @@ def replay(
         raise FieldLogError(f"{source}: neither a thesis test id ({', '.join(list_field_tests())}) nor an existing "
                             "field-log folder")
     return _replay_log(Path(source), out, terrain, internal_resistance, effect_modules, effect_names, substep, dt,
-                       figure, say)
+                       figure, say, force)
 
 
 def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, substep, dt, figure,
-                say) -> ReplayResult:
+                say, force=False) -> ReplayResult:
     import trackenv as te
 
     from .plots import maneuver_figure
@@ -223,6 +229,7 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
     if out.resolve() == log.folder.resolve():
         raise FieldLogError(f"{out}: the output folder is the input log's folder; choose another output folder "
                             "(writing there would overwrite the measured log.csv and meta.json)")
+    prepare_output_dir(out, "replay", force=force, inputs=(log.folder,))
     params = te.load_params(terrain or log.terrain, vehicle=log.vehicle, internal_resistance=internal or "constant",
                             effects=effect_modules)
     t_log = log.t

@@ -30,15 +30,33 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import instruments
-from .integrate import advance, is_finite
+from .integrate import advance, is_physical
+from .parallel import shard, split_count
 from .physics.model import State, initial_state
 
 DEFAULT_DT = 0.05  # s, control / output interval
 DEFAULT_SUBSTEP = 0.0005  # s, chosen by the convergence study (tests/test_convergence.py, README)
+# Largest substep accepted by simulate and the environments [s]: the stability sweep of
+# benchmarks/stability.py (README, Numerics) stays bounded on every thesis maneuver up to MAX_SUBSTEP
+# and blows up beyond it. Accuracy needs far less (DEFAULT_SUBSTEP).
+MAX_SUBSTEP = 0.01
 
 
 class SimulationDiverged(RuntimeError):
-    """A simulation produced a non-finite state; the message gives the time of divergence."""
+    """A simulation's state became non-finite or left the physical bounds (``integrate.is_physical``);
+    the message gives the time of divergence."""
+
+
+def check_substep(substep, interval: float, interval_name: str = "dt") -> None:
+    """Raise ``ValueError`` naming the parameter if ``substep`` is not in (0, min(MAX_SUBSTEP, interval)]."""
+    if not (isinstance(substep, (int, float, np.floating)) and math.isfinite(substep) and substep > 0):
+        raise ValueError(f"substep must be a positive number of seconds, got {substep!r}")
+    if substep > MAX_SUBSTEP * (1 + 1e-9):
+        raise ValueError(
+            f"substep = {substep:g} s exceeds the stable limit MAX_SUBSTEP = {MAX_SUBSTEP:g} s of the integrator "
+            f"(the verified default is {DEFAULT_SUBSTEP:g} s)")
+    if substep > interval * (1 + 1e-9):
+        raise ValueError(f"substep = {substep:g} s exceeds {interval_name} = {interval:g} s; use a substep <= {interval_name}")
 
 
 class VoltageProfile(eqx.Module):
@@ -125,8 +143,9 @@ class Trajectory(eqx.Module):
 
     t: (T,) [s]; state: :class:`State` with leading T axis; channels: instrument channels
     (``trackenv.instruments.CHANNELS``), each (T, *b), SI; voltage: (T, 2, *b) [V];
-    diverged: (*b) bool; t_diverged: (*b) time of the first non-finite state [s] (NaN if none).
-    After divergence the state is frozen at its last finite value and ``diverged`` is set.
+    diverged: (*b) bool; t_diverged: (*b) time of the first non-finite or non-physical state
+    (``integrate.is_physical``) [s] (NaN if none). After divergence the state is frozen at its last
+    physical value and ``diverged`` is set.
     """
 
     t: jax.Array
@@ -157,7 +176,7 @@ def simulate_core(params, profile: VoltageProfile, state0: State, n_steps: int, 
     def control_step(carry, v_sub):
         state, diverged, t_div, k = carry
         new = advance(state, v_sub, params, h, unroll=unroll)
-        ok = is_finite(new, nb)
+        ok = is_physical(new, params, nb)
         newly = (~ok) & (~diverged)
         t_now = t0 + (k + 1) * dt
         t_div = jnp.where(newly, t_now, t_div)
@@ -198,7 +217,8 @@ def simulate(
         profile: a :class:`VoltageProfile` (voltages linear between samples, evaluated at every RK stage).
         t_end: simulated duration [s]; a multiple of ``dt``.
         dt: output interval [s] (default 0.05 s, the environments' control step).
-        substep: largest integration substep [s] (default 0.5 ms, from the convergence study).
+        substep: largest integration substep [s] (default 0.5 ms, from the convergence study); at most
+            ``dt`` and ``MAX_SUBSTEP``, otherwise ``ValueError``.
         initial: initial :class:`State` (default: at rest at the origin, heading 0).
         on_divergence: ``"raise"`` raises :class:`SimulationDiverged` naming the time of divergence;
             ``"flag"`` returns the trajectory with ``diverged``/``t_diverged`` set (also what happens
@@ -211,8 +231,7 @@ def simulate(
         raise ValueError(f"t_end must be a positive finite number of seconds, got {t_end!r}")
     if not (dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be positive, got {dt!r}")
-    if not (substep > 0 and math.isfinite(substep)):
-        raise ValueError(f"substep must be positive, got {substep!r}")
+    check_substep(substep, dt, "dt")
     n_steps = int(round(t_end / dt))
     if abs(n_steps * dt - t_end) > 1e-9 * max(1.0, t_end) or n_steps < 1:
         raise ValueError(f"t_end = {t_end} s is not a whole number of output steps dt = {dt} s")
@@ -229,6 +248,10 @@ def simulate(
     if initial is None:
         initial = initial_state(params, batch)
     substeps = n_substeps(dt, substep)
+    if len(batch) == 1 and split_count(batch[0]) > 1:  # both cores: the vehicle axis split (parallel.py)
+        params, profile, initial = shard((params, profile, initial), batch[0], axis=-1)
+        profile = VoltageProfile(jax.device_put(profile.t, jax.sharding.NamedSharding(
+            profile.volts.sharding.mesh, jax.sharding.PartitionSpec())), profile.volts)
     traj = _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps)
     if on_divergence == "raise" and not isinstance(traj.diverged, jax.core.Tracer):
         div = np.asarray(traj.diverged)
@@ -237,7 +260,8 @@ def simulate(
             td = np.asarray(traj.t_diverged)[tuple(where[0])] if div.ndim else float(traj.t_diverged)
             who = "" if div.ndim == 0 else f" (vehicle {tuple(int(i) for i in where[0])}, {int(div.sum())} of {div.size})"
             raise SimulationDiverged(
-                f"simulation diverged: the state became non-finite at t = {float(td):.3f} s{who}; "
+                f"simulation diverged: the state became non-finite or left the physical bounds (|i| > 10x stall "
+                f"current, |omega| > 10x no-load speed) at t = {float(td):.3f} s{who}; "
                 "pass on_divergence='flag' to get the trajectory up to that time"
             )
     return traj

@@ -424,6 +424,30 @@ def _versions() -> dict:
             "python": sys.version.split()[0]}
 
 
+def rollout_steps(cfg: dict, algo: str) -> int:
+    """Environment steps SB3 collects per unit of training: n_envs x n_steps (PPO), n_envs (SAC)."""
+    if algo == "ppo":
+        return int(cfg["n_envs"]) * int(cfg.get("n_steps", 2048))  # 2048: PPO's own default
+    return int(cfg["n_envs"])
+
+
+def check_budget(cfg: dict, algo: str, where: str = "n_timesteps") -> int:
+    """``ConfigError`` if ``n_timesteps`` is below one rollout (SB3 would silently train a whole rollout);
+    a warning if it is not a multiple of one (SB3 rounds up). Returns the steps that will be trained."""
+    unit = rollout_steps(cfg, algo)
+    n = int(cfg["n_timesteps"])
+    how = (f"n_envs {cfg['n_envs']} x n_steps {cfg.get('n_steps', 2048)}" if algo == "ppo"
+           else f"n_envs {cfg['n_envs']}")
+    if n < unit:
+        raise ConfigError(f"{where} = {n} is less than one {algo.upper()} rollout ({how} = {unit} steps), which "
+                          f"SB3 would train anyway; give at least {unit}, or lower n_envs/n_steps in the config")
+    trained = -(-n // unit) * unit
+    if trained != n:
+        warnings.warn(f"{where} = {n} is not a multiple of the {unit}-step rollout ({how}); SB3 trains {trained} "
+                      "steps", stacklevel=3)
+    return trained
+
+
 def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: str | Path | dict | None = None,
           seed: int = 0, timesteps: int | None = None, out_dir: str | Path | None = None,
           run_dir: str | Path | None = None, resume: bool = False,
@@ -444,6 +468,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < 1:
             raise ConfigError(f"timesteps must be a positive integer, got {timesteps!r}")
         cfg["n_timesteps"] = int(timesteps)
+    check_budget(cfg, algo, where="--timesteps" if timesteps is not None else "n_timesteps")
     name = driver_name(task, terrain)
     out = Path(out_dir) if out_dir is not None else ROOT / "out" / "train" / f"{name}-{algo}-s{seed}"
     run = Path(run_dir) if run_dir is not None else out

@@ -6,6 +6,7 @@ import pytest
 
 import trackenv
 from trackenv.envs import core
+from trackenv.integrate import physical_bounds
 from trackenv.envs.vector import TrackVectorEnv
 
 
@@ -75,6 +76,37 @@ def test_divergence_truncates_with_flag():
     # the nominal vehicle does not diverge
     *_, info = step_once(np.array([11.8, 11.8], np.float32))
     assert info["diverged"] is False
+
+
+@pytest.mark.parametrize("substep", [0.03, 0.0125])
+def test_substep_above_stable_limit_is_rejected(substep):
+    with pytest.raises(ValueError, match=r"substep = .* exceeds the stable limit MAX_SUBSTEP = 0.01 s"):
+        gym.make("trackenv/GoStop-v0", substep=substep)
+    with pytest.raises(ValueError, match="MAX_SUBSTEP"):
+        TrackVectorEnv("go_stop", 2, substep=substep)
+
+
+def test_substep_above_control_dt_is_rejected():
+    with pytest.raises(ValueError, match=r"substep = 0.008 s exceeds control_dt = 0.005 s"):
+        gym.make("trackenv/GoStop-v0", control_dt=0.005, substep=0.008)
+
+
+def test_blow_up_is_flagged_before_overflow():
+    # J_eff / 100 at the largest accepted substep: the integration blows up; the step that leaves the
+    # physical bounds is flagged and the state returned is the last physical one.
+    sim = trackenv.replace(trackenv.load_params("dry_sand"), **{"vehicle.drive_inertia": 1.7e-4})
+    params = core.make_params("go_stop", sim_params=sim, substep=0.01)
+    env = gym.make("trackenv/GoStop-v0", params=params)
+    env.reset(seed=0)
+    i_max, w_max = (float(b) for b in physical_bounds(sim))
+    for _ in range(40):
+        obs, r, term, trunc, info = env.step(np.array([11.8, 11.8], np.float32))
+        assert np.max(np.abs(info["state"]["current"])) <= i_max
+        assert np.max(np.abs(info["state"]["omega"])) <= w_max
+        assert abs(r) < 100.0
+        if trunc:
+            break
+    assert info["diverged"] is True and trunc is True
 
 
 def test_vector_divergence_resets():

@@ -27,8 +27,9 @@ EFFECT_IDS: tuple[str, ...] = tuple(EFFECTS)
 
 
 def get_effect(effect_id: str, dtype=jnp.float32, **params) -> Effect:
-    """The effect ``effect_id`` with default parameters, overridden by ``params`` (validated against ``bounds``)."""
-    if effect_id not in EFFECTS:
+    """The effect ``effect_id`` with default parameters, overridden by ``params`` (validated against ``bounds``
+    by the effect's constructor, :meth:`Effect.check_bounds`)."""
+    if not isinstance(effect_id, str) or effect_id not in EFFECTS:
         raise ValueError(f"unknown effect id {effect_id!r}; known ids: {', '.join(EFFECT_IDS)}")
     cls = EFFECTS[effect_id]
     effect = cls.default(dtype=dtype)
@@ -39,19 +40,10 @@ def get_effect(effect_id: str, dtype=jnp.float32, **params) -> Effect:
         if key not in fields:
             raise ValueError(f"effect {effect_id!r} has no parameter {key!r}; parameters: {', '.join(fields)}")
         if key in cls.bounds:
-            lo, hi = cls.bounds[key]
             try:
-                v = float(value)
-            except TypeError:  # arrays (batches) are checked elementwise
-                import numpy as np
-
-                v_arr = np.asarray(value, dtype=float)
-                if not (np.all(v_arr >= lo) and np.all(v_arr <= hi)):
-                    raise ValueError(f"effect {effect_id!r}: parameter {key!r} out of bounds [{lo}, {hi}]") from None
-            else:
-                if not (lo <= v <= hi):
-                    raise ValueError(f"effect {effect_id!r}: parameter {key!r} = {v} out of bounds [{lo}, {hi}]")
-            fields[key] = jnp.asarray(value, dtype)
+                fields[key] = jnp.asarray(value, dtype)
+            except (TypeError, ValueError):
+                raise ValueError(f"effect {effect_id!r}: parameter {key!r} must be a number, got {value!r}") from None
         else:
             fields[key] = value  # static choices (e.g. sensor_artifacts.rectify)
     return cls(**fields)
@@ -65,8 +57,11 @@ def resolve_effects(effects) -> tuple:
     """Effect ids (MODEL.md §8) or :class:`Effect` modules -> a tuple of modules for ``load_params``.
 
     Ids get their default parameters (:func:`get_effect`); an unknown id raises ``ValueError``
-    listing the known ones; anything that is neither raises ``TypeError``.
+    listing the known ones; anything that is neither raises ``TypeError``. A single id or module may be
+    given without a list (``effects="slip_sinkage"`` is ``("slip_sinkage",)``).
     """
+    if isinstance(effects, (str, Effect)):
+        effects = (effects,)
     out = []
     for e in tuple(effects or ()):
         if isinstance(e, str):

@@ -25,12 +25,38 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
+import jax
+import numpy as np
 
 
 class Effect(eqx.Module):
     """Base class of effects. Subclasses set ``id`` and override the hooks they need."""
 
     id: ClassVar[str] = "effect"
+    bounds: ClassVar[dict] = {}  # parameter name -> (low, high), inclusive, SI
+
+    def __check_init__(self):
+        self.check_bounds()
+
+    def check_bounds(self) -> None:
+        """Every concrete parameter inside ``bounds`` and finite; ``ValueError`` naming effect and parameter.
+
+        Runs whenever an effect is constructed (``__check_init__``); traced values (inside ``jit``,
+        ``vmap``, ``grad``) are not checked.
+        """
+        for name, (lo, hi) in type(self).bounds.items():
+            value = getattr(self, name, None)
+            if value is None or isinstance(value, jax.core.Tracer):
+                continue
+            try:
+                v = np.asarray(value, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):
+                raise ValueError(f"effect {self.id!r}: parameter {name!r} must be a number, got {value!r}") from None
+            bad = ~np.isfinite(v) | (v < lo) | (v > hi)
+            if bad.any():
+                x = float(v[np.flatnonzero(bad)[0]])
+                raise ValueError(f"effect {self.id!r}: parameter {name!r} = {x:.10g} out of bounds "
+                                 f"[{lo:.10g}, {hi:.10g}]")
 
     def initial_state(self, params, batch_shape: tuple):
         """Initial extra state (a pytree of arrays with trailing ``batch_shape``), or ``None``."""

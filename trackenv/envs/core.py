@@ -10,7 +10,7 @@ classes (:mod:`trackenv.envs.gym_env`, :mod:`trackenv.envs.vector`) are thin wra
 
 One control step holds the two motor voltages constant for ``control_dt`` (default 0.05 s) and
 integrates the model with the ETDRK4 substeps of ``trackenv.integrate.advance_constant``, in substeps
-(default ``ENV_DEFAULT_SUBSTEP`` = 1 ms; ``simulate`` verifies 0.5 ms).
+(default ``ENV_DEFAULT_SUBSTEP``, simulate's verified ``DEFAULT_SUBSTEP``).
 
 Actions: the two motor voltages [V_left, V_right] in volts, clipped to +-voltage_limit (24 V); with
 ``normalize_action=True`` an action in [-1, 1] is clipped and scaled by the voltage limit.
@@ -27,8 +27,11 @@ prev_voltage_l/r    [-V_max, V_max] V   the previous (clipped) action, in volts
 time_fraction       [0, 1]              t / max_time
 ==================  ==================  =============================================
 
-Divergence: if the integrated state is non-finite after a step, the physical state is frozen at its
-last finite value, the reward is 0 and the episode is *truncated* with ``info["diverged"] = True``.
+Divergence: if the integrated state is non-finite or leaves the physical bounds after a step (|i| >
+10x the stall current, |omega| > 10x the no-load speed: ``integrate.is_physical``), the physical state
+is frozen at its last physical value, the reward is 0 and the episode is *truncated* with
+``info["diverged"] = True``. A substep above ``control_dt`` or the integrator's stable limit
+(``simulate.MAX_SUBSTEP``) is rejected when the environment is built.
 """
 
 from __future__ import annotations
@@ -41,16 +44,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..integrate import advance_constant, is_finite
+from ..integrate import advance_constant, is_physical
 from ..params import Params, load_params
 from ..physics.model import State, initial_state
 from ..effects import resolve_effects
-from ..simulate import n_substeps
+from ..simulate import DEFAULT_SUBSTEP, check_substep, n_substeps
 
-# Environments default to a 1 ms substep, twice simulate's verified 0.5 ms: against the adaptive
-# reference 1 ms keeps every channel's NRMSE <= 1.4% on the thesis maneuvers (README, Numerics) and
-# steps ~1.6x faster, which is what RL training needs. Pass substep=0.0005 for the verified setting.
-ENV_DEFAULT_SUBSTEP = 0.001  # s
+# Environments default to simulate's verified substep (the convergence study, README Numerics):
+# no faster default that is off the reference. Pass substep= to trade accuracy for speed.
+ENV_DEFAULT_SUBSTEP = DEFAULT_SUBSTEP  # s
 from . import randomization
 from .tasks import TASKS, Task
 
@@ -165,8 +167,7 @@ def make_params(
         raise ValueError(f"unknown task {task!r}; known: {', '.join(TASKS)}")
     if not (isinstance(control_dt, (int, float)) and math.isfinite(control_dt) and control_dt > 0):
         raise ValueError(f"control_dt must be a positive number of seconds, got {control_dt!r}")
-    if not (isinstance(substep, (int, float)) and math.isfinite(substep) and substep > 0):
-        raise ValueError(f"substep must be a positive number of seconds, got {substep!r}")
+    check_substep(substep, control_dt, "control_dt")
     if physics_batching not in ("vmap", "native"):
         raise ValueError(f"physics_batching must be 'vmap' or 'native', got {physics_batching!r}")
     if sim_params is None:
@@ -331,7 +332,7 @@ def step(state: EnvState, action, params: EnvParams) -> tuple[EnvState, StepResu
     volts = clip_action(action, params)
     sim = state.sim
     new, energy = physics_step(state.physics, volts, sim, params)
-    finite = is_finite(new, 0) & jnp.isfinite(energy)
+    finite = is_physical(new, sim, 0) & jnp.isfinite(energy)
     phys = _tree_where(finite, new, state.physics)
     diverged = ~finite
     energy = jnp.where(finite, energy, 0.0)

@@ -12,7 +12,8 @@ Options (keyword arguments of ``gym.make``):
 - ``terrain``: any ``configs/terrain`` id (``dry_sand``, ``asphalt``, ``sandy_loam_1`` ...) or a YAML path;
 - ``effects``: ids of MODEL.md §8 (resolved through ``trackenv.effects``) or effect modules;
 - ``control_dt``: control step [s], default 0.05; ``substep``: largest integration substep [s],
-  default ``trackenv.envs.core.ENV_DEFAULT_SUBSTEP`` (1 ms: NRMSE <= 1.4% vs the reference, README);
+  default ``trackenv.envs.core.ENV_DEFAULT_SUBSTEP`` (the verified substep of ``simulate``, README),
+  at most ``control_dt`` and ``trackenv.simulate.MAX_SUBSTEP`` (else ``ValueError``);
 - ``domain_randomization``: ``False`` (default), ``True`` (default ranges) or a dict of ranges, see
   :mod:`trackenv.envs.randomization`;
 - ``normalize_action``: ``False`` (default, actions in volts) or ``True`` (actions in [-1, 1] times
@@ -35,7 +36,13 @@ full physical state (``pose`` (3,), ``vel`` (3,), ``omega`` (2,), ``current`` (2
 (2, N) and effect states), float32 numpy arrays in SI units.
 
 The episode ends with ``terminated`` on success or when the vehicle leaves the course, and with
-``truncated`` at ``max_time`` or when the simulation diverges (``info["diverged"]``).
+``truncated`` at ``max_time`` or when the simulation diverges (``info["diverged"]``). A ``step`` after
+the episode has ended (terminated or truncated) without a ``reset`` raises Gymnasium's
+``gymnasium.error.ResetNeeded``, the error its ``OrderEnforcing`` wrapper raises for a step before the first
+reset (the vector env resets finished sub-environments itself).
+
+Keyword arguments are checked before anything is built: a mistyped one (``terain=``) raises ``TypeError``
+listing every accepted keyword (the environment's and the task's) and the closest match.
 """
 
 from __future__ import annotations
@@ -47,6 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 
 from .core import ENV_DEFAULT_SUBSTEP
 from . import core
@@ -131,6 +139,7 @@ class TrackEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
         if params is None:
+            check_keywords(task, task_kwargs)
             params = core.make_params(task, terrain=terrain, vehicle=vehicle, internal_resistance=internal_resistance,
                                       effects=effects, control_dt=control_dt, substep=substep,
                                       domain_randomization=domain_randomization, normalize_action=normalize_action,
@@ -153,6 +162,7 @@ class TrackEnv(gym.Env):
         self._reset_fn, self._step_fn = jitted(self._scodec, self._pcodec)
         self._pf, self._pi = (jnp.asarray(v) for v in self._pcodec.ravel_host(params))
         self._sf = self._si = None
+        self._ended = None  # "terminated"/"truncated" once the episode has ended, until reset()
         self._layout = Layout(params, self._scodec.unravel_host(np.zeros(self._scodec.n_float, np.float32),
                                                                 np.zeros(self._scodec.n_int, np.int32)))
         self._trail: list[tuple[float, float]] = []
@@ -168,6 +178,7 @@ class TrackEnv(gym.Env):
             raise ValueError(f"reset options are not supported, got keys {sorted(options)}")
         episode_seed = np.uint32(self.np_random.integers(0, 2**32 - 1, dtype=np.uint32))
         self._sf, self._si, packed = self._reset_fn(episode_seed, self._pf, self._pi)
+        self._ended = None
         host = np.array(packed)
         obs, info = host[: self._layout.n_obs], self._layout.info_dict(host)
         if self.render_mode is not None:
@@ -179,6 +190,10 @@ class TrackEnv(gym.Env):
     def step(self, action):
         if self._sf is None:
             raise RuntimeError("call reset() before step()")
+        if self._ended is not None:
+            raise ResetNeeded(f"{self.task_name}: step() after the episode ended ({self._ended}=True at t = "
+                              f"{self._ended_time:g} s); call reset() first (Gymnasium: stepping a finished "
+                              "episode is undefined)")
         a = self.check_action(action)
         self._sf, self._si, packed = self._step_fn(self._sf, self._si, a, self._pf, self._pi)
         host = np.array(packed)  # the one device-to-host transfer (a writable copy)
@@ -189,7 +204,11 @@ class TrackEnv(gym.Env):
             pose = info["state"]["pose"]
             self._trail.append((float(pose[0]), float(pose[1])))
             self._last_info = info
-        return obs, float(host[lay.reward]), bool(host[lay.terminated] > 0.5), bool(host[lay.truncated] > 0.5), info
+        terminated, truncated = bool(host[lay.terminated] > 0.5), bool(host[lay.truncated] > 0.5)
+        if terminated or truncated:
+            self._ended = "terminated" if terminated else "truncated"
+            self._ended_time = info["time"]
+        return obs, float(host[lay.reward]), terminated, truncated, info
 
     def render(self):
         if self.render_mode is None:
@@ -231,6 +250,26 @@ class TrackEnv(gym.Env):
         if self._sf is None:
             return None
         return self._scodec.unravel_host(np.asarray(self._sf), np.asarray(self._si))
+
+
+ENV_KEYWORDS = ("terrain", "effects", "control_dt", "substep", "render_mode", "domain_randomization",
+                "normalize_action", "vehicle", "internal_resistance", "params")
+
+
+def check_keywords(task: str, task_kwargs: dict) -> None:
+    """``TypeError`` for a keyword neither the environment nor the task accepts, listing all accepted ones."""
+    import difflib
+
+    from .tasks import TASKS
+
+    if task not in TASKS:
+        return  # make_params reports the unknown task
+    accepted = sorted(set(ENV_KEYWORDS) | set(TASKS[task].DEFAULTS))
+    unknown = sorted(set(task_kwargs) - set(TASKS[task].DEFAULTS))
+    if unknown:
+        close = difflib.get_close_matches(unknown[0], accepted, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise TypeError(f"{task}: unknown option(s) {unknown}{hint}; accepted: {', '.join(accepted)}")
 
 
 def _task_env(task_name: str, doc: str):

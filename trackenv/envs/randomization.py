@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..params import ConfigError, Params
+from ..params import ConfigError, Params, check_range, fmt_num
 
 _SAND = {
     "terrain.cohesion": (0.0, 3040.0),
@@ -121,11 +121,29 @@ def resolve(params: Params, spec: Any) -> tuple[tuple[str, ...], np.ndarray, np.
             except (TypeError, ValueError):
                 raise ConfigError(f"domain randomisation: range for '{path}' must be (low, high), got {rng!r}") from None
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-            raise ConfigError(f"domain randomisation: range for '{path}' = {rng!r} needs finite low <= high")
+            raise ConfigError(f"domain randomisation: range for '{path}' = ({fmt_num(lo)}, {fmt_num(hi)}) needs "
+                              "finite low <= high")
+        _check_bounds(params, path, lo, hi)
         paths.append(path)
         lows.append(lo)
         highs.append(hi)
     return tuple(paths), np.asarray(lows, np.float32), np.asarray(highs, np.float32)
+
+
+def _check_bounds(params: Params, path: str, lo: float, hi: float) -> None:
+    """Both ends of a range inside the parameter's physical bounds (the params bounds table, or an effect's)."""
+    parts = path.split(".")
+    if parts[0] == "effects" and len(parts) == 3:
+        eff = params.effects[int(parts[1])]
+        b = type(eff).bounds.get(parts[2])
+        if b is not None and not (b[0] <= lo and hi <= b[1]):
+            raise ConfigError(f"domain randomisation: range ({fmt_num(lo)}, {fmt_num(hi)}) of '{path}' leaves the "
+                              f"bounds [{fmt_num(b[0])}, {fmt_num(b[1])}] of effect {eff.id!r}")
+        return
+    try:
+        check_range(path, lo, hi)
+    except ConfigError as exc:
+        raise ConfigError(f"domain randomisation: {exc}") from None
 
 
 def sample(params: Params, key, paths: tuple[str, ...], low, high) -> tuple[Params, jax.Array]:

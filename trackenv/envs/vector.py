@@ -46,6 +46,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..parallel import shard
 from .core import ENV_DEFAULT_SUBSTEP
 from . import core
 from .flat import FlatCodec, codecs
@@ -177,14 +178,15 @@ class TrackVectorEnv(VectorEnv):
         mask = options.pop("reset_mask", None)
         if options:
             raise ValueError(f"unsupported reset options {sorted(options)} (only 'reset_mask')")
-        seeds = self._seeds(seed)
+        seeds = shard(self._seeds(seed), self.num_envs, axis=0)  # large batches: one half per core
         if mask is not None:
             mask = np.asarray(mask)
             if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
                 raise ValueError(f"options['reset_mask'] must be a bool array of shape ({self.num_envs},)")
             if self._sf is None:
                 raise RuntimeError("reset_mask needs a previous full reset()")
-            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, seeds, mask, self._pf, self._pi,
+            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, seeds, shard(mask, self.num_envs, 0),
+                                                             self._pf, self._pi,
                                                              with_physics=self.info_state, final=self._final)
         else:
             self._sf, self._si, packed = self._vreset(seeds, self._pf, self._pi, with_physics=self.info_state,
@@ -218,7 +220,7 @@ class TrackVectorEnv(VectorEnv):
     def step(self, actions):
         if self._sf is None:
             raise RuntimeError("call reset() before step()")
-        a = self.check_actions(actions)
+        a = shard(self.check_actions(actions), self.num_envs, axis=0)
         self._sf, self._si, packed = self._vstep(self._sf, self._si, a, self._pf, self._pi, mode=self._mode,
                                                  with_physics=self.info_state, final=self._final)
         host = np.array(packed)  # the one device-to-host transfer

@@ -116,6 +116,31 @@ def forces_from_saturated(terrain, area, normal, jz_sat, jx_sat):
     return longitudinal, lateral
 
 
+def saturation_slopes(kin: Kinematics):
+    """dS_z/ds (2, 1, *b) and dS_x/dv_y (1, N, *b) of :func:`saturations` (closed form of 3.17, 3.33)."""
+    dz = tm.step5_slope(jnp.abs(kin.slip), SLIP_SAT_START, 0.0, SLIP_SAT_END, 1.0) * jnp.sign(kin.slip)
+    dx = tm.step5_slope(jnp.abs(kin.lateral_velocity), LATERAL_SAT_START, 0.0, LATERAL_SAT_END, 1.0) \
+        * jnp.sign(kin.lateral_velocity)
+    return dz[:, None], dx
+
+
+def force_slopes(terrain, area, normal, jz_sat, jx_sat):
+    """d F_long / d j'_z and d F_lat / d j'_x [N/m] of :func:`forces_from_saturated`, elementwise.
+
+    F_long = f_z(|j'_z|) g_a(j'_z) with g_a = smoothsign of width a (3.20), so
+    dF/dj' = A dtau/d|j| sgn(j') g_a + f_z g_a'; likewise F_lat = -f_x g_b(j'_x) (3.36).
+    """
+    pressure = normal / area
+    fz = tm.shear_stress(jz_sat, pressure, terrain) * area
+    fx = tm.shear_stress(jx_sat, pressure, terrain) * area
+    dfz = tm.shear_stress_slope(jz_sat, pressure, terrain) * area * jnp.sign(jz_sat)
+    dfx = tm.shear_stress_slope(jx_sat, pressure, terrain) * area * jnp.sign(jx_sat)
+    a, b = LONG_FORCE_SMOOTHING, LAT_FORCE_SMOOTHING
+    d_long = dfz * tm.smoothsign(jz_sat, a) + fz * tm.step5_slope(jz_sat, -a, -1.0, a, 1.0)
+    d_lat = -(dfx * tm.smoothsign(jx_sat, b) + fx * tm.step5_slope(jx_sat, -b, -1.0, b, 1.0))
+    return d_long, d_lat
+
+
 def shear_forces(terrain, kin: Kinematics, normal, jz, jx):
     """Longitudinal and lateral shear forces at each element [N] (3.17-3.20, 3.33-3.36)."""
     sat_z, sat_x = saturations(kin)

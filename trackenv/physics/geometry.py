@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 
 def trailing(a, nb: int):
@@ -14,7 +15,7 @@ def trailing(a, nb: int):
 def contact_x(vehicle, nb: int):
     """Body-frame x of the contact points, front to rear: x_i = L/2 - (i-1) L/(N-1) [m], shape (1, N, *b)."""
     n = vehicle.n_contact
-    idx = trailing(jnp.arange(n, dtype=jnp.result_type(vehicle.contact_length)), nb)[None]
+    idx = trailing(np.arange(n).astype(jnp.result_type(vehicle.contact_length)), nb)[None]
     spacing = vehicle.contact_length / (n - 1)
     return 0.5 * vehicle.contact_length - idx * spacing
 
@@ -22,14 +23,15 @@ def contact_x(vehicle, nb: int):
 def contact_area(vehicle, nb: int):
     """Element areas by the trapezoid rule: A_1 = A_N = b D/2, else b D [m^2], shape (1, N, *b)."""
     n = vehicle.n_contact
-    weights = jnp.ones(n).at[0].set(0.5).at[-1].set(0.5)
+    weights = np.ones(n)
+    weights[0] = weights[-1] = 0.5
     spacing = vehicle.contact_length / (n - 1)
     return trailing(weights.astype(jnp.result_type(spacing)), nb)[None] * (vehicle.track_width * spacing)
 
 
 def track_y(vehicle, nb: int):
     """Body-frame y of the track centrelines, left +B/2, right -B/2 [m], shape (2, *b)."""
-    side = trailing(jnp.array([1.0, -1.0], dtype=jnp.result_type(vehicle.track_gauge)), nb)
+    side = trailing(np.array([1.0, -1.0], dtype=jnp.result_type(vehicle.track_gauge)), nb)
     return side * (0.5 * vehicle.track_gauge)
 
 

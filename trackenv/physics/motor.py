@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .terramechanics import smoothsign
+from .terramechanics import smoothsign, step5_slope
 
 OMEGA_SMOOTHING = 0.05  # rad/s, width of smoothsign(omega) for stiction and b*_int (MODEL.md §5)
 
@@ -15,6 +15,12 @@ def internal_resistance_torque(internal, omega):
 def friction_torque(vehicle, omega):
     """Drive-train friction b_eff omega + tau_stick smoothsign(omega) [N m] (4.1, Table 4.1)."""
     return vehicle.drive_damping * omega + vehicle.stiction_torque * smoothsign(omega, OMEGA_SMOOTHING)
+
+
+def resistance_slope(vehicle, internal, omega):
+    """d/domega of friction_torque + internal_resistance_torque [N m s/rad] (closed form)."""
+    ds = step5_slope(omega, -OMEGA_SMOOTHING, -1.0, OMEGA_SMOOTHING, 1.0)
+    return vehicle.drive_damping + internal.viscous + (vehicle.stiction_torque + internal.constant) * ds
 
 
 def sprocket_acceleration(vehicle, current, omega, tau_int, tau_back):

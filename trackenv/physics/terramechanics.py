@@ -15,6 +15,12 @@ def step5(x, x0, h0, x1, h1):
     return h0 + (h1 - h0) * s**3 * (10.0 - 15.0 * s + 6.0 * s * s)
 
 
+def step5_slope(x, x0, h0, x1, h1):
+    """d/dx of :func:`step5` for constant h0, h1: (h1 - h0)/(x1 - x0) 30 s^2 (1 - s)^2, zero outside (x0, x1)."""
+    s = jnp.clip((x - x0) / (x1 - x0), 0.0, 1.0)
+    return (h1 - h0) / (x1 - x0) * 30.0 * (s * (1.0 - s)) ** 2
+
+
 def smoothsign(x, a):
     """Smooth sign function STEP5(x, -a, -1, a, 1) (MODEL.md §3)."""
     return step5(x, -a, -1.0, a, 1.0)
@@ -57,6 +63,23 @@ def shear_stress(shear_displacement, normal_pressure, terrain):
         return wong_hump_shear_stress(shear_displacement, normal_pressure, c, phi, k, terrain.residual_ratio)
     if terrain.shear_law == "wong_peak":
         return wong_peak_shear_stress(shear_displacement, normal_pressure, c, phi, k)
+    raise ValueError(f"unknown shear law {terrain.shear_law!r}")
+
+
+def shear_stress_slope(shear_displacement, normal_pressure, terrain):
+    """d tau / d|j| [Pa/m] of :func:`shear_stress` (closed forms of 2.8/3.19, 2.11, 2.12)."""
+    c, phi, k = terrain.cohesion, terrain.friction_angle, terrain.shear_modulus
+    tau_max = shear_strength(normal_pressure, c, phi)
+    x = jnp.abs(shear_displacement) / k
+    if terrain.shear_law == "janosi":
+        return tau_max * jnp.exp(-x) / k
+    if terrain.shear_law == "wong_hump":
+        k_r = terrain.residual_ratio
+        a = 1.0 / (k_r * (1.0 - jnp.exp(-1.0))) - 1.0
+        e1 = jnp.exp(1.0 - x)
+        return tau_max * k_r * (-a * e1 * (1.0 - jnp.exp(-x)) + (1.0 + a * e1) * jnp.exp(-x)) / k
+    if terrain.shear_law == "wong_peak":
+        return tau_max * jnp.exp(1.0 - x) * (1.0 - x) / k
     raise ValueError(f"unknown shear law {terrain.shear_law!r}")
 
 

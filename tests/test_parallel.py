@@ -1,0 +1,66 @@
+"""Batches split across the host devices (trackenv.parallel) give the same trajectories as one device."""
+
+import os
+
+import jax
+import numpy as np
+import pytest
+
+import trackenv as te
+from trackenv import parallel
+from trackenv.envs.vector import TrackVectorEnv
+
+
+def test_one_host_device_per_core():
+    # trackenv is imported before the first JAX computation of the test process, so it sets them up
+    if "TRACKENV_HOST_DEVICES" in os.environ:
+        pytest.skip("device count set by the environment")
+    assert len(parallel.cpu_devices()) == min(parallel._cores(), parallel.MAX_HOST_DEVICES)
+
+
+def test_split_count_rule(monkeypatch):
+    n = len(parallel.cpu_devices())
+    if n < 2:
+        pytest.skip("one host device")
+    m = parallel.MIN_PER_DEVICE
+    assert parallel.split_count(1) == 1
+    assert parallel.split_count(n * m - n) == 1  # too few per core
+    assert parallel.split_count(n * m) == n
+    assert parallel.split_count(n * m + 1) == 1  # does not divide evenly
+
+
+def test_split_simulation_matches_one_device(monkeypatch):
+    if len(parallel.cpu_devices()) < 2:
+        pytest.skip("one host device")
+    monkeypatch.setattr(parallel, "MIN_PER_DEVICE", 2)
+    b = 4
+    rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [0.8, 16, 6], [1.0, 0, 0]], float)
+    volts = rows[:, 1:, None] * np.linspace(0.8, 1.2, b)[None, None]
+    prof = te.VoltageProfile.from_arrays(rows[:, 0], volts)
+    params = te.replace(te.load_params("dry_sand"), **{"terrain.cohesion": np.linspace(500.0, 1500.0, b)})
+    split = te.simulate(params, prof, 1.0, substep=0.001)
+    assert len(split.channels["x"].sharding.device_set) == 2
+    monkeypatch.setattr(parallel, "MIN_PER_DEVICE", 10**9)
+    one = te.simulate(params, prof, 1.0, substep=0.001)
+    assert len(one.channels["x"].sharding.device_set) == 1
+    for k in ("speed_ideal", "yaw_rate", "i_left", "x", "y"):
+        a, c = np.asarray(split.channels[k]), np.asarray(one.channels[k])
+        assert np.abs(a[-1]).max() > 1e-3  # the vehicles moved
+        np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-6 * np.abs(c).max())
+
+
+def test_split_vector_env_matches_one_device(monkeypatch):
+    if len(parallel.cpu_devices()) < 2:
+        pytest.skip("one host device")
+    out = {}
+    for per in (2, 10**9):
+        monkeypatch.setattr(parallel, "MIN_PER_DEVICE", per)
+        venv = TrackVectorEnv("go_stop", 4, autoreset_mode="same_step", substep=0.002)
+        venv.reset(seed=3)
+        a = np.array([[11.8, 11.8], [6, 6], [20, 20], [0, 3]], np.float32)
+        for _ in range(3):
+            obs, rew, *_ = venv.step(a)
+        out[per] = (obs, rew, jax.tree.leaves(venv._sf)[0].sharding.device_set)
+    assert len(out[2][2]) == 2 and len(out[10**9][2]) == 1
+    np.testing.assert_allclose(out[2][0], out[10**9][0], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(out[2][1], out[10**9][1], rtol=1e-5, atol=1e-5)

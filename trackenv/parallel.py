@@ -1,0 +1,99 @@
+"""Both cores for batches: the vehicle axis split across XLA host devices.
+
+XLA's CPU backend runs one computation on one core. With ``--xla_force_host_platform_device_count=n``
+it exposes n CPU devices, and a batch whose vehicle axis is sharded over them (``jax.sharding``) is
+partitioned by XLA into n per-core programs that run in parallel: one substep loop per core, no
+communication until the results are gathered.
+
+That flag is read once, when JAX initialises its backends. :func:`configure_host_devices` (called
+when ``trackenv`` is imported) therefore sets it only if the backends are not yet initialised and
+``XLA_FLAGS`` does not set it already; importing trackenv *after* a first JAX computation leaves one
+device, and batches then run on one core (nothing else changes). ``TRACKENV_HOST_DEVICES=1`` opts out.
+Single vehicles and small batches stay on the default device (one core): splitting them costs more
+than it gains (:data:`MIN_PER_DEVICE`).
+"""
+
+from __future__ import annotations
+
+import os
+
+MIN_PER_DEVICE = 256  # vehicles per core below which a batch is not split (measured, README Performance)
+MAX_HOST_DEVICES = 8
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def configure_host_devices() -> None:
+    """Expose one XLA CPU device per core (at most ``MAX_HOST_DEVICES``) if JAX has not started yet."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" in flags:
+        return
+    want = os.environ.get("TRACKENV_HOST_DEVICES")
+    try:
+        n = int(want) if want else min(_cores(), MAX_HOST_DEVICES)
+    except ValueError:
+        raise ValueError(f"TRACKENV_HOST_DEVICES must be an integer number of devices, got {want!r}") from None
+    if n <= 1:
+        return
+    try:
+        from jax._src import xla_bridge
+        if xla_bridge.backends_are_initialized():
+            return
+    except (ImportError, AttributeError):  # pragma: no cover - other JAX versions: leave JAX alone
+        return
+    os.environ["XLA_FLAGS"] = (flags + f" --xla_force_host_platform_device_count={n}").strip()
+
+
+def cpu_devices():
+    import jax
+    return [d for d in jax.devices() if d.platform == "cpu"] or jax.devices()
+
+
+def split_count(batch: int) -> int:
+    """How many devices a batch of ``batch`` vehicles is split over (1: not split).
+
+    All host devices when every one gets at least ``MIN_PER_DEVICE`` vehicles and the batch divides
+    evenly, else 1.
+    """
+    n = len(cpu_devices())
+    if n <= 1 or batch < n * MIN_PER_DEVICE or batch % n:
+        return 1
+    return n
+
+
+def batch_sharding(ndim: int, axis: int, batch: int):
+    """A ``NamedSharding`` splitting ``axis`` of an ``ndim``-array over the devices, or None."""
+    n = split_count(batch)
+    if n == 1 or ndim == 0:
+        return None
+    import numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    mesh = Mesh(np.array(cpu_devices()[:n]), ("vehicles",))
+    spec = [None] * ndim
+    spec[axis % ndim] = "vehicles"
+    return NamedSharding(mesh, PartitionSpec(*spec))
+
+
+def shard(tree, batch: int, axis: int = -1):
+    """Place every array leaf of ``tree`` whose ``axis`` has length ``batch`` split over the devices
+    (other leaves replicated); unchanged if the batch is not split."""
+    import jax
+    n = split_count(batch)
+    if n == 1:
+        return tree
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    import numpy as np
+    mesh = Mesh(np.array(cpu_devices()[:n]), ("vehicles",))
+
+    def put(x):
+        x = jax.numpy.asarray(x)
+        if x.ndim and x.shape[axis] == batch:
+            return jax.device_put(x, batch_sharding(x.ndim, axis, batch))
+        return jax.device_put(x, NamedSharding(mesh, PartitionSpec()))
+
+    return jax.tree.map(put, tree)
