@@ -29,8 +29,8 @@ import jax
 import numpy as np
 
 import trackenv  # noqa: F401  (registers the environments)
-from trackenv.envs.vector import TrackVectorEnv
 from trackenv.envs.core import ENV_DEFAULT_SUBSTEP as DEFAULT_SUBSTEP
+from trackenv.envs.vector import TrackVectorEnv
 
 
 def bench_single(substep: float, seconds: float) -> tuple[float, float]:

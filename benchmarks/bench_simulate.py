@@ -11,7 +11,7 @@ Prints Markdown tables for the README, every number from this one process run:
 - one 10 s go-stop on dry sand at the default substep (compile time, wall time, x real time), and
   the same model as a plain numpy right-hand side (``numpy_model.py``, checked against the JAX
   derivative) under ``scipy.integrate.solve_ivp`` (LSODA, rtol 1e-6) on the same voltage log;
-- batches (vehicles on the last axis, MODEL.md §6) through ``te.simulate``, which splits large
+- batches (vehicles on the last axis, docs/model.md §6) through ``te.simulate``, which splits large
   batches across the host devices (``trackenv.parallel``), and the same batch on one device;
 - GFLOP/s beside the machine's measured peak (a 2048^2 float32 matmul).
 """
@@ -114,7 +114,7 @@ def main(argv=None):
     print(f"peak (2048^2 float32 matmul, one core): {peak:.1f} GFLOP/s\n")
 
     # the compiled substep
-    print("| substep loop | fused kernels in the loop body | FLOP / substep / vehicle | us / substep | us / substep / vehicle | GFLOP/s | % of peak |")
+    print("| substep loop | fused kernels in the loop body | FLOP / substep / vehicle | us / substep | us / substep / vehicle | GFLOP/s | % of peak |")  # noqa: E501
     print("|---|---|---|---|---|---|---|")
     for batch, n_loop in (((), 2000), ((256,), 50)):
         nf, fl, us = substep_kernels(params, batch, n_loop)

@@ -1,6 +1,6 @@
 """The base vehicle model as a plain numpy right-hand side, for timing against scipy's solvers.
 
-An independent transcription of the base model (MODEL.md §1-5: Janosi shear, z*/z-bar logic, Bekker
+An independent transcription of the base model (docs/model.md §1-5: Janosi shear, z*/z-bar logic, Bekker
 compaction, roll load transfer, the two DC motor circuits; no effects) as a function
 ``rhs(t, y) -> dy/dt`` on the flat 66-number state [X, Y, psi, u, v, r, omega_l, omega_r, i_l, i_r,
 j_z (2 x N), j_x (2 x N)], written for ``scipy.integrate.solve_ivp``. :func:`check` compares it with

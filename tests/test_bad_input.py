@@ -14,13 +14,12 @@ import contextlib
 import hashlib
 import io
 import json
-import shutil
 import subprocess
 import sys
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import gymnasium as gym
 import numpy as np

@@ -14,10 +14,10 @@ import pytest
 
 import trackenv as te
 from trackenv.diagnose import blind
+from trackenv.effects import EFFECT_IDS
 from trackenv.fieldlog import read_field_log
 from trackenv.physics import contact
 from trackenv.physics.model import Context, initial_state
-from trackenv.effects import EFFECT_IDS
 
 f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
 

@@ -46,7 +46,7 @@ SPINS = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def reference(name):
     terrain, rows, t_end = MANEUVERS[name]
     with jax.enable_x64(True):

@@ -14,8 +14,8 @@ import trackenv as te
 from trackenv.diagnose import DiagnosisError, candidate_set, diagnose
 from trackenv.diagnose.data import load_tests, noise_level
 from trackenv.diagnose.fit import heldout_mask, make_folds
-from trackenv.diagnose.stats import centred_interval, dm_test, gap_test, noise_ar1
 from trackenv.diagnose.phases import phase_spans, segment_phases
+from trackenv.diagnose.stats import centred_interval, dm_test, gap_test, noise_ar1
 from trackenv.fieldlog import write_log_columns
 
 TWIN = te.__file__.rsplit("/", 2)[0] + "/data/field/thesis"
@@ -116,7 +116,7 @@ def test_gap_test_detects_a_small_systematic_bias_and_passes_pure_noise():
 def test_dm_test_controls_the_null_and_finds_a_better_model():
     rng = np.random.default_rng(1)
     hits = 0
-    for k in range(200):  # two equally good models: correlated per-sample losses
+    for _ in range(200):  # two equally good models: correlated per-sample losses
         base = np.convolve(rng.normal(0, 1, 1200), np.ones(20) / 20, mode="same")
         a = (base + rng.normal(0, 0.3, base.size)) ** 2
         b = (base + rng.normal(0, 0.3, base.size)) ** 2

@@ -1,4 +1,4 @@
-"""The effect extension point (MODEL.md §8): forces, extra states and instrument transforms added
+"""The effect extension point (docs/model.md §8): forces, extra states and instrument transforms added
 without editing the base model, checked against the steady-state algebra."""
 
 from typing import ClassVar

@@ -1,4 +1,4 @@
-"""Field logs (MODEL.md §9): reading, validation errors that name file/column/row, writing.
+"""Field logs (docs/model.md §9): reading, validation errors that name file/column/row, writing.
 
 No simulation here (fast): ``write_field_log`` is exercised with a hand-made Trajectory; the
 simulate → write → read → replay round trip is in ``test_replay.py``.

@@ -69,10 +69,10 @@ def test_vehicle_units_and_derived_gains():
     assert float(v.alpha) == pytest.approx(raw["torque_constant"] * raw["gear_ratio"], rel=1e-6)
     # K_v in rpm/V -> back-emf constant in V s/rad at the sprocket
     assert float(v.alpha_v) == pytest.approx(raw["gear_ratio"] * 60.0 / (2 * math.pi * raw["speed_constant"]), rel=1e-6)
-    assert float(v.alpha) == pytest.approx(0.902, rel=1e-3)  # MODEL.md §2
+    assert float(v.alpha) == pytest.approx(0.902, rel=1e-3)  # docs/model.md §2
     assert float(v.alpha_v) / float(v.alpha) == pytest.approx(1.0 - 0.0025, abs=5e-4)  # differ by 0.25 %
     assert v.n_contact == 14
-    # drive damping: thesis Table 4.1 (0.024221; MODEL.md §2 misprints 0.0244221)
+    # drive damping: thesis Table 4.1 (0.024221; Table B.3 prints 0.0244221)
     assert float(v.drive_damping) == pytest.approx(0.024221, rel=1e-6)
 
 

@@ -7,7 +7,7 @@ measurements are one sample out of step with its voltages must not.
 
 The maneuver ends while the vehicle is still moving: near rest the model's discrete choices (the
 leading edge is picked by the sign of the track's ground speed when the belt is almost still,
-MODEL.md §3) amplify float32 round-off (1e-7 V) into ~0.04 A, which is the model's sensitivity, not
+docs/model.md §3) amplify float32 round-off (1e-7 V) into ~0.04 A, which is the model's sensitivity, not
 the replay's. Compiles are shared: every 50 Hz replay has the same shapes, so only four programs are
 compiled in this file.
 """

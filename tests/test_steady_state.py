@@ -2,7 +2,7 @@
 
 The reference is written here from scratch in numpy/scipy and reads the *raw* YAML numbers (its own
 unit conversions: rpm/V -> V s/rad, degrees -> radians), so it checks the loader as well as the
-physics and the integrator. It generalises App. D to the full model of MODEL.md (both tracks,
+physics and the integrator. It generalises App. D to the full model of docs/model.md (both tracks,
 belt radius r_s' = r_s + h_g on hard ground, the slip saturation of (3.17), stiction, the
 0.25 % difference between K_t G_r and G_r/K_v):
 
@@ -12,7 +12,7 @@ belt radius r_s' = r_s + h_g on hard ground, the slip saturation of (3.17), stic
     V - R_m i - alpha_v omega = 0                              (D.11)
 
 with uniform pressure p0 = m g / (2 b L) (no roll or pitch transfer in a straight line), the
-trapezoid element areas of MODEL.md §1, Janosi's law, and Bekker's compaction resistance (3.40)
+trapezoid element areas of docs/model.md §1, Janosi's law, and Bekker's compaction resistance (3.40)
 R_c = b k z0^(n+1)/(n+1), z0 = (p0/k)^(1/n), k = k_c/b + k_phi.
 """
 
@@ -175,7 +175,7 @@ def test_reference_is_not_trivially_satisfied():
     assert abs(c["u"] / d["u"] - 1.0) > 0.05
 
 
-# MODEL.md §10: (terrain, V_l, V_r, internal, speed_ideal, u, yaw rate, i_left, i_right)
+# docs/model.md §10: (terrain, V_l, V_r, internal, speed_ideal, u, yaw rate, i_left, i_right)
 MODEL_TABLE = [
     ("dry_sand", 11.8, 11.8, "constant", 1.1080, 1.1040, 0.0, 1.8550, 1.8550),
     ("asphalt", 11.8, 11.8, "constant", 1.1104, 1.2083, 0.0, 1.7781, 1.7781),
@@ -190,7 +190,7 @@ MODEL_TABLE = [
 
 @pytest.mark.parametrize("row", MODEL_TABLE, ids=lambda r: f"{r[0]}-{r[1]}-{r[2]}-{r[3]}")
 def test_model_md_section10_table(row):
-    """Cross-check against the independent LSODA implementation of MODEL.md §10 (1 %)."""
+    """Cross-check against the independent LSODA implementation of docs/model.md §10 (1 %)."""
     terrain, vl, vr, internal, speed, u, yaw, il, ir = row
     ch = simulate_hold(terrain, internal, vl, vr)
     mean = {k: float(np.mean(v)) for k, v in ch.items()}
@@ -202,7 +202,7 @@ def test_model_md_section10_table(row):
 
 
 def test_section10_currents_explained_by_b_eff_typo():
-    """MODEL.md §2 prints b_eff = 0.0244221; thesis Table 4.1 (and configs/) say 0.024221.
+    """Table B.3 prints b_eff = 0.0244221; thesis Table 4.1 (and configs/) say 0.024221.
 
     The §10 straight-line currents sit ~0.15-0.24 % above ours; the reference solved with the
     misprinted 0.0244221 reproduces them to 0.02 %, and with 0.024221 it reproduces the simulator.

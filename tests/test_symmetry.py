@@ -1,4 +1,4 @@
-"""Symmetries of the model (MODEL.md §1-5): exact properties any correct implementation must have.
+"""Symmetries of the model (docs/model.md §1-5): exact properties any correct implementation must have.
 
 - Left/right mirror (y -> -y): swapping V_left and V_right mirrors the trajectory: y, heading, yaw
   rate and v change sign; x, u and the ideal speed are unchanged; the two tracks swap.

@@ -1,4 +1,4 @@
-"""Anchors from the thesis text (MODEL.md §8; thesis §5.4.1, eqs. 5.8-5.12).
+"""Anchors from the thesis text (docs/model.md §8; thesis §5.4.1, eqs. 5.8-5.12).
 
 - Go-stop on dry sand at 1.1 m/s: measured steady current 1.98 A (mean over 1-3 s). The constant
   internal-resistance model (Table 5.4, tuned on it) must reproduce it within 10 %.
@@ -26,7 +26,7 @@ def hold(internal, volts, window=(1.0, 3.0)):
     sel = (t >= window[0] - 1e-6) & (t <= window[1] + 1e-6)
     ch = traj.channels
     speed = float(np.mean(np.asarray(ch["speed_ideal"])[sel]))
-    # the field ammeter reports |i| (MODEL.md §7), averaged over both motors
+    # the field ammeter reports |i| (docs/model.md §7), averaged over both motors
     current = float(np.mean(0.5 * (np.abs(np.asarray(ch["i_left"])) + np.abs(np.asarray(ch["i_right"])))[sel]))
     return speed, current
 

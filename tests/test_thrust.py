@@ -5,7 +5,7 @@ and for a uniform pressure p = W/(b L) Janosi's law integrates to (thesis 2.25, 
 
     F = (A c + W tan phi) [1 - K/(i L) (1 - exp(-i L / K))],   A = b L.
 
-The model replaces the integral by the trapezoid rule on N = 14 contact points (MODEL.md §1), using
+The model replaces the integral by the trapezoid rule on N = 14 contact points (docs/model.md §1), using
 its own force function (``contact.forces_from_saturated``) here. The closed form is the reference;
 the discretisation error must be small at N = 14 and shrink at second order as N grows.
 

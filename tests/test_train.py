@@ -1,4 +1,4 @@
-"""SB3 drivers (issue 4): config validation, policy loading, evaluation metrics, and a learning smoke test."""
+"""SB3 drivers: config validation, policy loading, evaluation metrics, and a learning smoke test."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ from .parallel import configure_host_devices
 
 configure_host_devices()  # one XLA CPU device per core for split batches, before JAX starts (parallel.py)
 
-from .params import ConfigError, Params, load_params, list_terrains, list_vehicles, replace
+from .params import ConfigError, Params, list_terrains, list_vehicles, load_params, replace
 from .physics.model import State, initial_state
 from .simulate import SimulationDiverged, Trajectory, VoltageProfile, simulate
 

@@ -3,7 +3,7 @@
     trackenv simulate go_stop_dry_sand --out out/sim       # one thesis test (reconstructed voltages)
     trackenv simulate --voltages 12,-12 --t-end 5 --terrain asphalt --out out/zrt
     trackenv demo --out out/demo                           # every thesis test: figures + summary
-    trackenv replay logs/go_stop_01 --out out/replay       # a field-log folder (MODEL.md §9) vs the model
+    trackenv replay logs/go_stop_01 --out out/replay       # a field-log folder (docs/model.md §9) vs the model
     trackenv replay go_stop_dry_sand --out out/r           # a thesis test (reconstructed voltages)
     trackenv replay --list                                 # the thesis test ids
     trackenv field-twin --out data/field/thesis --seed 0   # SYNTHETIC field twin (known effects + noise)
@@ -64,9 +64,8 @@ def cmd_simulate(args) -> int:
     import numpy as np
 
     import trackenv as te
-    from trackenv.plots import maneuver_figure
-
     from trackenv.outputs import prepare_output_dir
+    from trackenv.plots import maneuver_figure
 
     out = prepare_output_dir(args.out, "simulate", force=args.force)
     if args.test:
@@ -96,9 +95,8 @@ def cmd_demo(args) -> int:
     from tqdm import tqdm
 
     from trackenv.field_profiles import list_field_tests
-    from trackenv.plots import maneuver_figure
-
     from trackenv.outputs import prepare_output_dir
+    from trackenv.plots import maneuver_figure
 
     out = prepare_output_dir(args.out, "demo", force=args.force)
     rows = []
@@ -131,7 +129,7 @@ SAND_TESTS = ["go_stop_dry_sand", "go_stop_2ms_dry_sand", "j_turn_dry_sand", "la
 
 
 def _demo_diagnoses(out: Path) -> list[str]:
-    """The demo's main job: diagnose the thesis's own gaps on the SYNTHETIC field twin (issue 5)."""
+    """The demo's main job: diagnose the thesis's own gaps on the SYNTHETIC field twin."""
     from trackenv.diagnose import diagnose
 
     twin = Path(__file__).resolve().parent.parent / "data" / "field" / "thesis"
@@ -190,7 +188,7 @@ def _demo_twin_replays(out: Path, substep: float) -> list[str]:
 
 REPLAY_HELP = """Replay a field test through the simulator and compare with what was measured.
 
-SOURCE is a field-log folder (MODEL.md §9: log.csv + meta.json) or a thesis test id
+SOURCE is a field-log folder (docs/model.md §9: log.csv + meta.json) or a thesis test id
 (`trackenv replay --list`; their voltages are RECONSTRUCTED from the thesis text, not measured).
 A bare thesis id wins over a folder of the same name: write ./NAME for the folder.
 
@@ -379,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default="out/replay", help="output folder (default out/replay)")
     r.add_argument("--terrain", help="terrain id of configs/terrain (default: meta.json's or the test's)")
     r.add_argument("--effects", nargs="+", metavar="ID", default=(),
-                   help="MODEL.md §8 effect ids to add to the base model (none implemented yet); "
+                   help="docs/model.md §8 effect ids to add to the base model (none implemented yet); "
                         "give SOURCE before this option")
     r.add_argument("--internal-resistance", choices=("constant", "viscous"),
                    help="internal track resistance model (default: the test's; constant for logs)")
@@ -419,14 +417,14 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--methods", default="learned,open_loop,classical", help="comma-separated subset")
     e.add_argument("--json", help="write the metrics of every method to this JSON file")
     e.add_argument("--figures", help="folder for trajectory / voltage / speed and yaw-rate figures (PNG)")
-    e.add_argument("--log-dir", help="write every episode as a MODEL.md §9 field-log folder here (SYNTHETIC)")
+    e.add_argument("--log-dir", help="write every episode as a docs/model.md §9 field-log folder here (SYNTHETIC)")
     e.add_argument("--force", action="store_true",
                    help="write into the output folder even if it holds field logs trackenv did not write")
     e.set_defaults(func=cmd_evaluate)
 
     g = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a folder of field logs: where, which effect, "
                                         "how far it closes")
-    g.add_argument("folder", help="folder with one sub-folder per field test (MODEL.md §9), or one field-log folder")
+    g.add_argument("folder", help="folder with one sub-folder per field test (docs/model.md §9), or one field-log folder")
     g.add_argument("--out", required=True, help="output folder (report.md, report.json, figures)")
     g.add_argument("--tests", default=None, help="comma-separated sub-folder names to use (default: all)")
     g.add_argument("--internal-resistance", default="constant", choices=["constant", "viscous"],

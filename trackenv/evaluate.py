@@ -38,7 +38,7 @@ The summary per method: success rate, the mean (and std) of each metric over the
 (completion time over the successful ones). By default the terrain is nominal, so every episode of
 a deterministic method is the same; ``randomize=True`` samples Table 5.6-style ranges per episode
 (:mod:`trackenv.envs.randomization`) and the seeds matter. ``log_dir`` writes each episode as a
-MODEL.md §9 field-log folder (``log.csv`` at the 20 Hz control rate, signed currents, ``meta.json``
+docs/model.md §9 field-log folder (``log.csv`` at the 20 Hz control rate, signed currents, ``meta.json``
 with ``"synthetic": true``) that ``trackenv replay`` reads like a field test.
 """
 
@@ -47,14 +47,15 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import yaml
 
 from .params import ConfigError
-from .train import ENV_NAME, ROOT, driver_name, load_policy, resolve_task, resolve_terrain
+from .train import ENV_NAME, ROOT, load_policy, resolve_task, resolve_terrain
 
 METHODS = ("learned", "open_loop", "classical")
 GAINS_FILE = ROOT / "configs" / "train" / "classical_gains.yaml"
@@ -396,9 +397,9 @@ def evaluate(task: str, terrain: str = "dry_sand", policy: str | Path | Any | No
             model = load_policy(policy, task, sim_t, env=None)
         else:
             model = policy
-        from .train import PolicySpaceError, _same_box  # noqa: PLC0415
-
         from gymnasium import spaces  # noqa: PLC0415
+
+        from .train import PolicySpaceError, _same_box  # noqa: PLC0415
 
         want = spaces.Box(np.asarray(venv.params.obs_low), np.asarray(venv.params.obs_high), dtype=np.float32)
         if not _same_box(model.observation_space, want):
@@ -437,7 +438,7 @@ def evaluate(task: str, terrain: str = "dry_sand", policy: str | Path | Any | No
 
 
 def write_logs(all_eps: dict, task: str, terrain: str, log_dir: Path) -> list[Path]:
-    """Each episode as a MODEL.md §9 field-log folder ``<log_dir>/<method>_seed<seed>/`` (SYNTHETIC)."""
+    """Each episode as a docs/model.md §9 field-log folder ``<log_dir>/<method>_seed<seed>/`` (SYNTHETIC)."""
     from .fieldlog import write_log_columns  # noqa: PLC0415
 
     out = []
@@ -604,7 +605,7 @@ def evaluate_cli(args) -> int:
     if args.figures:
         print(f"figures in {args.figures}")
     if args.log_dir:
-        print(f"field logs (SYNTHETIC, MODEL.md §9) in {args.log_dir}")
+        print(f"field logs (SYNTHETIC, docs/model.md §9) in {args.log_dir}")
     return 0
 
 

@@ -12,7 +12,7 @@ File format (YAML, one file per test, named ``<id>.yaml``; exactly these top-lev
     id: go_stop_dry_sand            # must equal the file name's stem
     maneuver: go_stop               # go_stop | j_turn | lane_change | zero_radius_turn
     terrain: dry_sand               # a terrain id of configs/terrain (dry_sand | asphalt)
-    internal_resistance: constant   # constant | viscous (MODEL.md §2, §5)
+    internal_resistance: constant   # constant | viscous (docs/model.md §2, §5)
     t_end: 5.0                      # s, simulated duration, >= the last breakpoint's t
     source: "thesis §5.3.1, Fig. 5.2; §5.4.1"
     reconstructed: true
@@ -25,7 +25,7 @@ File format (YAML, one file per test, named ``<id>.yaml``; exactly these top-lev
       - [0.3, 11.8, 11.8]
 
 Voltages are linear between breakpoints. The first breakpoint is at t = 0; times are strictly
-increasing; |V| <= 24 V (the bus voltage, MODEL.md §2). When ``t_end`` lies beyond the last
+increasing; |V| <= 24 V (the bus voltage, docs/model.md §2). When ``t_end`` lies beyond the last
 breakpoint the voltages **hold the last breakpoint's values** up to ``t_end`` (every shipped
 profile ends at 0 V, so the tail is the vehicle coasting/braking to rest); before t = 0 they
 hold the first values. :meth:`FieldProfile.voltages_at` implements exactly this.
@@ -71,7 +71,7 @@ __all__ = [
 
 FIELD_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "field"
 
-V_LIMIT = 24.0  # V, bus voltage (MODEL.md §2)
+V_LIMIT = 24.0  # V, bus voltage (docs/model.md §2)
 
 MANEUVERS = ("go_stop", "j_turn", "lane_change", "zero_radius_turn")
 INTERNAL_RESISTANCE_MODELS = ("constant", "viscous")

@@ -1,4 +1,4 @@
-"""Field logs: read, validate and write the MODEL.md §9 format (a folder with ``log.csv`` + ``meta.json``).
+"""Field logs: read, validate and write the docs/model.md §9 format (a folder with ``log.csv`` + ``meta.json``).
 
     from trackenv.fieldlog import read_field_log, write_field_log
     log = read_field_log("logs/zrt_sand_03")      # FieldLog; raises FieldLogError on bad input
@@ -174,7 +174,7 @@ class FieldLog:
 
 
 def validate_meta(meta: Any, where: str = "meta.json") -> dict:
-    """Check a ``meta.json`` mapping (MODEL.md §9) and return a copy with defaults filled in.
+    """Check a ``meta.json`` mapping (docs/model.md §9) and return a copy with defaults filled in.
 
     Raises :class:`FieldLogError` naming ``where`` and the key.
     """
@@ -349,7 +349,7 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
 
 
 def read_field_log(folder: str | Path) -> FieldLog:
-    """Read and validate a field-log folder (``log.csv`` + ``meta.json``, MODEL.md §9).
+    """Read and validate a field-log folder (``log.csv`` + ``meta.json``, docs/model.md §9).
 
     Raises :class:`FieldLogError` naming the file, and for ``log.csv`` the column and the row
     (``line L (data row R)``: CSV line, header = line 1; data row R = L - 1).
@@ -362,7 +362,7 @@ def read_field_log(folder: str | Path) -> FieldLog:
     log_path, meta_path = folder / "log.csv", folder / "meta.json"
     for p in (log_path, meta_path):
         if not p.is_file():
-            raise FieldLogError(f"{p}: missing file (a field-log folder holds log.csv and meta.json, MODEL.md §9)")
+            raise FieldLogError(f"{p}: missing file (a field-log folder holds log.csv and meta.json, docs/model.md §9)")
     meta = _read_meta(meta_path)
     data = _read_csv(log_path, meta)
     return FieldLog(folder=folder, data=data, meta=meta)

@@ -1,4 +1,4 @@
-"""What the field instruments report (MODEL.md §7; thesis §4.4, §5.3).
+"""What the field instruments report (docs/model.md §7; thesis §4.4, §5.3).
 
 - ideal speed from the sprocket encoders: r_s (omega_left + omega_right)/2 with the *nominal* r_s (5.1);
 - yaw rate from a gyro;

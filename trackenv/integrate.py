@@ -1,6 +1,6 @@
 """Fixed-step exponential RK4 (Cox-Matthews ETDRK4) with substeps, for the vehicle model.
 
-The model has two stiff *linear* decay terms (MODEL.md §6): the motor circuit, di/dt = -(R_m/L_m) i
+The model has two stiff *linear* decay terms (docs/model.md §6): the motor circuit, di/dt = -(R_m/L_m) i
 + ..., with R_m/L_m = 3950 1/s, and the shear displacements, dj/dt = -(|V_t|/z*) j + ..., with rates
 up to 1e6 1/s at the leading edge. ETDRK4 integrates dx/dt = -lambda x + N(x) exactly in its linear
 part, so these terms cost nothing in step size; every other state is advanced by classical RK4 (ETDRK4
@@ -23,8 +23,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .physics.model import State, decay_rates, evaluate
 from .physics import contact
+from .physics.model import State, decay_rates, evaluate
 from .physics.motor import current_decay_rate, resistance_slope
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series

@@ -1,6 +1,6 @@
 """The output-folder guard shared by every command that writes a folder (replay, simulate, diagnose, evaluate, demo).
 
-A command never writes into a folder that holds a field log (MODEL.md §9: ``log.csv`` or ``meta.json``,
+A command never writes into a folder that holds a field log (docs/model.md §9: ``log.csv`` or ``meta.json``,
 in the folder itself or in one of its sub-folders) unless trackenv wrote that folder, or unless the
 caller passes ``force=True`` (``--force`` on the command line). A folder trackenv wrote carries the
 manifest ``trackenv_output.json`` (the command, the time and the trackenv version), written by

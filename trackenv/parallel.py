@@ -86,8 +86,8 @@ def shard(tree, batch: int, axis: int = -1):
     n = split_count(batch)
     if n == 1:
         return tree
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
     import numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
     mesh = Mesh(np.array(cpu_devices()[:n]), ("vehicles",))
 
     def put(x):

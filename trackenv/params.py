@@ -1,6 +1,6 @@
 """Parameters as immutable JAX pytrees, loaded and validated from ``configs/``.
 
-Every number comes from a YAML file whose entries are ``{value, unit, source}`` (MODEL.md §2).
+Every number comes from a YAML file whose entries are ``{value, unit, source}`` (docs/model.md §2).
 The loaders reject unknown keys, missing keys and non-physical values with a :class:`ConfigError`
 that names the file and the key, so a typo never becomes a silent default.
 
@@ -97,7 +97,7 @@ class Terrain(eqx.Module):
 class InternalResistance(eqx.Module):
     """Internal track resistance tau_int(omega) = constant*smoothsign(omega) + viscous*omega.
 
-    The thesis's two models are the two special cases (MODEL.md §5): ``constant`` (5.10, Table 5.4,
+    The thesis's two models are the two special cases (docs/model.md §5): ``constant`` (5.10, Table 5.4,
     the default) sets ``viscous = 0``; ``viscous`` (3.41, Table 5.3) sets ``constant = 0``. Keeping
     both as numbers makes the choice differentiable and batchable.
     """
@@ -109,7 +109,7 @@ class InternalResistance(eqx.Module):
 class Params(eqx.Module):
     """Everything a simulation needs: vehicle, terrain, internal resistance, and effects.
 
-    ``effects`` is a tuple of :class:`trackenv.effects.Effect` modules (MODEL.md §8); it is empty
+    ``effects`` is a tuple of :class:`trackenv.effects.Effect` modules (docs/model.md §8); it is empty
     for the thesis's base model.
     """
 
@@ -486,7 +486,7 @@ def load_params(
         vehicle: a ``configs/vehicle`` id or a YAML path.
         internal_resistance: ``"constant"`` (Table 5.4, the thesis's final model) or ``"viscous"``
             (Table 5.3, its first model).
-        effects: effect modules to add to the base model (MODEL.md §8).
+        effects: effect modules to add to the base model (docs/model.md §8).
         dtype: ``jnp.float32`` (default) or ``jnp.float64``; float64 needs ``jax_enable_x64``.
     """
     dtype = jnp.dtype(dtype)

@@ -8,7 +8,6 @@ voltage profile's breakpoints. Use float64 parameters.
 from __future__ import annotations
 
 import diffrax
-import jax
 import jax.numpy as jnp
 import numpy as np
 

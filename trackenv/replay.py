@@ -1,7 +1,7 @@
 """Replay: drive the simulator with a field test's voltages and compare with what was measured.
 
     from trackenv.replay import replay
-    res = replay("logs/go_stop_sand_01", "out/replay")      # a MODEL.md §9 field-log folder
+    res = replay("logs/go_stop_sand_01", "out/replay")      # a docs/model.md §9 field-log folder
     res = replay("go_stop_dry_sand", "out/thesis")          # a thesis test id (configs/field)
     res.metrics["channels"]["i_left"]["nrmse"]
 
@@ -13,7 +13,7 @@ Both write into ``out_dir``:
   simulated vs measured where the log has measurements;
 - ``metrics.json``: per-channel RMSE and NRMSE (log) or the thesis-text anchors (thesis test).
 
-**Field-log folder.** The voltages are linear between the log's samples (MODEL.md §1), evaluated at
+**Field-log folder.** The voltages are linear between the log's samples (docs/model.md §1), evaluated at
 every RK4 stage. The simulation starts from rest, at the origin with heading 0, at the log's first
 sample: if the log's ``t`` does not start at 0 it is shifted (``t_sim = t - t[0]``; the shift is
 ``t_offset_s`` in ``meta.json``/``metrics.json``), and the figure's time axis is time since the first
@@ -40,9 +40,10 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -80,7 +81,7 @@ class ReplayResult:
 
 
 def resolve_effects(effects) -> tuple:
-    """Effect ids (MODEL.md §8) or effect modules -> modules; a bad id raises :class:`ConfigError`."""
+    """Effect ids (docs/model.md §8) or effect modules -> modules; a bad id raises :class:`ConfigError`."""
     from .effects import resolve_effects as resolve
     from .params import ConfigError
 
@@ -171,14 +172,14 @@ def replay(
     """Replay a field log folder or a thesis test id through the simulator; write log, figure, metrics.
 
     Args:
-        source: a MODEL.md §9 field-log folder (a ``Path``, or a string with a path separator or
+        source: a docs/model.md §9 field-log folder (a ``Path``, or a string with a path separator or
             naming an existing folder) or a thesis test id of ``configs/field`` (``trackenv replay
             --list``). A bare string that is a thesis test id is the thesis test even if a folder of
             that name exists; write ``./name`` for the folder.
         out_dir: output folder (created); ``log.csv``, ``meta.json``, ``replay.png``, ``metrics.json``.
         terrain: terrain id overriding the log's ``meta.json`` / the test's terrain.
         internal_resistance: ``"constant"`` or ``"viscous"`` (default: the test's; ``constant`` for logs).
-        effects: MODEL.md §8 effect ids (``trackenv.effects.EFFECT_IDS``, default parameters) or effect modules.
+        effects: docs/model.md §8 effect ids (``trackenv.effects.EFFECT_IDS``, default parameters) or effect modules.
         substep: integration substep [s] (default ``trackenv.simulate.DEFAULT_SUBSTEP``, 0.5 ms).
         dt: largest output step [s] of the simulation (default 0.05 s); see the module docstring.
         figure: write ``replay.png`` (the slowest output; ``False`` skips it).

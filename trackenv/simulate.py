@@ -9,7 +9,7 @@
 One compiled program per (shape, dtype, dt, substeps, effects); the core is a pure function
 (:func:`simulate_core`) that works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``. Batches can
 also be laid out with the vehicle index on the last axis of the profile and the parameters
-(MODEL.md §6), which needs no ``vmap``.
+(docs/model.md §6), which needs no ``vmap``.
 
 Precision: float32 by default; pass parameters loaded with ``dtype=jnp.float64`` (and enable
 ``jax_enable_x64``) for float64. Both agree to well under 1% on the thesis maneuvers (tests).
@@ -70,7 +70,7 @@ class VoltageProfile(eqx.Module):
     volts: jax.Array
 
     @classmethod
-    def from_breakpoints(cls, rows, dtype=jnp.float32, source: str = "breakpoints") -> "VoltageProfile":
+    def from_breakpoints(cls, rows, dtype=jnp.float32, source: str = "breakpoints") -> VoltageProfile:
         """From rows ``[t, v_left, v_right]``."""
         arr = np.asarray(rows, dtype=np.float64)
         if arr.ndim != 2 or arr.shape[1] != 3:
@@ -78,7 +78,7 @@ class VoltageProfile(eqx.Module):
         return cls.from_arrays(arr[:, 0], arr[:, 1:], dtype=dtype, source=source)
 
     @classmethod
-    def from_arrays(cls, t, volts, dtype=jnp.float32, source: str = "profile") -> "VoltageProfile":
+    def from_arrays(cls, t, volts, dtype=jnp.float32, source: str = "profile") -> VoltageProfile:
         """From times (K,) and voltages (K, 2[, *b]); validated (see :func:`validate_profile`)."""
         t = np.asarray(t, dtype=np.float64)
         volts = np.asarray(volts, dtype=np.float64)
@@ -89,7 +89,7 @@ class VoltageProfile(eqx.Module):
         return cls(jnp.asarray(t, dtype), jnp.asarray(volts, dtype))
 
     @classmethod
-    def constant(cls, v_left: float, v_right: float, dtype=jnp.float32) -> "VoltageProfile":
+    def constant(cls, v_left: float, v_right: float, dtype=jnp.float32) -> VoltageProfile:
         """Constant voltages from t = 0."""
         return cls.from_arrays([0.0, 1.0], [[v_left, v_right], [v_left, v_right]], dtype=dtype, source="constant")
 

@@ -1,4 +1,4 @@
-"""Stable-Baselines3 drivers: configs, training, loading (issue 4).
+"""Stable-Baselines3 drivers: configs, training, loading.
 
     trackenv train j_turn --terrain dry_sand --algo ppo --seed 0          # configs/train/ppo.yaml
     trackenv train JTurn-v0 --terrain asphalt --algo sac --timesteps 20000 --out out/train/jt
@@ -458,7 +458,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     Everything is validated (task, terrain, algorithm, config keys and values) before an environment
     is built. ``timesteps`` overrides the config's ``n_timesteps``; ``resume`` continues from the
     latest checkpoint in ``run_dir/checkpoints`` (the step count continues; the config must be the
-    same). ``run_dir`` (default ``out_dir``) holds the checkpoints and TensorBoard logs. ``threads``: torch threads (1 on a 2-core machine: the env runs in JAX's own threads).
+        same). ``run_dir`` (default ``out_dir``) holds the checkpoints and TensorBoard logs. ``threads``: torch
+    threads (1 on a 2-core machine: the env runs in JAX's own threads).
     """
     task = resolve_task(task)
     terrain = resolve_terrain(terrain)
@@ -553,8 +554,9 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
 
 def expected_spaces(task: str, terrain: str = "dry_sand", env_kwargs: dict | None = None):
     """(observation space, action space) of the SB3 env for ``task`` (normalised actions)."""
-    from .envs import core  # noqa: PLC0415
     from gymnasium import spaces  # noqa: PLC0415
+
+    from .envs import core  # noqa: PLC0415
 
     kw = {k: v for k, v in (env_kwargs or {}).items() if k not in ("physics_batching",)}
     p = core.make_params(resolve_task(task), terrain=terrain, normalize_action=True, **kw)

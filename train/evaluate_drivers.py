@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 torch.set_num_threads(1)
 
-from trackenv.evaluate import evaluate, format_table, _jsonable  # noqa: E402
+from trackenv.evaluate import _jsonable, evaluate, format_table  # noqa: E402
 from trackenv.train import ENV_NAME, load_policy  # noqa: E402
 
 SOILS = ("dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")
@@ -35,7 +35,7 @@ SOILS = ("dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam
 
 def main(only=None):
     drivers = ROOT / "train" / "drivers"
-    results, md = {}, []
+    results = {}
     out_json = ROOT / "train" / "results.json"
     if out_json.is_file():
         results = json.loads(out_json.read_text())

@@ -1,4 +1,3 @@
-import pytest
 import trackenv as te
 
 ZRT = [[0, 0, 0], [0.3, 12.0, -12.0], [30, 12.0, -12.0]]

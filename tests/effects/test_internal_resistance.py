@@ -27,7 +27,7 @@ def run(effect, rows=GO_2MS):
 
 def test_constant_default_and_linear_law_currents():
     p, i_base, tr = run(None)
-    assert i_base == pytest.approx(2.1292, rel=0.01)  # MODEL.md §10
+    assert i_base == pytest.approx(2.1292, rel=0.01)  # docs/model.md §10
     # same as the base constant model
     _, i_const, _ = run(get_effect("internal_resistance", b0=0.78, b1=0.0))
     assert i_const == pytest.approx(i_base, rel=1e-3)

@@ -34,8 +34,9 @@ def test_braking_shifts_load_forward_in_simulation():
     t = np.asarray(tr.t)
     assert a[(t > 0.05) & (t < 0.3)].max() > 0.3  # accelerating
     assert a[(t > 2.1) & (t < 2.5)].min() < -0.5  # braking
-    from trackenv.physics.model import evaluate
     import jax
+
+    from trackenv.physics.model import evaluate
     k = int(np.argmin(a))
     state = jax.tree.map(lambda v: v[k], tr.state)
     p = te.load_params("asphalt", effects=(e,))

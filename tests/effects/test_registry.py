@@ -30,6 +30,7 @@ def test_env_and_replay_resolve():
     (e,) = resolve_effects(["internal_resistance"])
     assert e.id == "internal_resistance"
     import gymnasium as gym
+
     import trackenv.envs  # noqa: F401
     env = gym.make("trackenv/ZeroRadiusTurn-v0", effects=["slip_sinkage"])
     obs, _ = env.reset(seed=0)

@@ -3,7 +3,6 @@ import warnings
 import pytest
 
 
-
 @pytest.fixture(autouse=True)
 def _quiet_action_space_advice():
     # Gymnasium and SB3 recommend a [-1, 1] action space; ours is in volts by design (normalize_action=True

@@ -6,8 +6,8 @@ import pytest
 
 import trackenv
 from trackenv.envs import core
-from trackenv.integrate import physical_bounds
 from trackenv.envs.vector import TrackVectorEnv
+from trackenv.integrate import physical_bounds
 
 
 def step_once(action, env_id="trackenv/GoStop-v0", **kwargs):

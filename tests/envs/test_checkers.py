@@ -3,12 +3,11 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from envs_common import ENV_IDS, TERRAINS
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import trackenv  # noqa: F401  (registers the environments)
-
-from envs_common import ENV_IDS, TERRAINS
 
 
 def test_registered():

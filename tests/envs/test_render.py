@@ -3,11 +3,10 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from envs_common import ENV_IDS
 
 import trackenv  # noqa: F401
 from trackenv.envs.vector import TrackVectorEnv
-
-from envs_common import ENV_IDS
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

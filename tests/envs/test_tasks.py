@@ -3,11 +3,10 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from envs_common import ENV_IDS, TERRAINS
 
 import trackenv  # noqa: F401
 from trackenv.envs import baselines
-
-from envs_common import ENV_IDS, TERRAINS
 
 
 def run(env, policy, seed=0):

@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis (issue 5): where the gap lies, which unmodelled effect causes it, how far
+"""Sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it, how far
 it shrinks once that effect is added.
 
     from trackenv.diagnose import diagnose

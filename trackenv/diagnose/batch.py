@@ -1,6 +1,6 @@
 """Batched simulation of many (test, parameter set) pairs in one jitted call per candidate.
 
-All the pairs of a candidate run as one batch with the vehicle index on the last axis (MODEL.md §6):
+All the pairs of a candidate run as one batch with the vehicle index on the last axis (docs/model.md §6):
 vehicle ``j * S + s`` is test ``j`` with parameter set ``s``. Tests of similar length share a batch
 (``buckets``: padded to the longest; a test much shorter than the longest goes to its own bucket so
 that padding wastes at most half the work). Each test's voltages are resampled onto the batch's

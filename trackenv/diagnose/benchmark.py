@@ -1,6 +1,6 @@
 """The withheld-effect check: ``trackenv diagnose-benchmark --cases N``.
 
-Blind cases come from :mod:`.blind` (a random effect of each MODEL.md §8 kind in a functional form
+Blind cases come from :mod:`.blind` (a random effect of each docs/model.md §8 kind in a functional form
 *different* from the candidate library's, or none; random parameters, maneuvers, rates, noise, ammeter
 type and small base-parameter perturbations). Each case folder is diagnosed by :func:`.core.diagnose`
 without its label (the answer key is stored outside the case folders and read only afterwards).

@@ -1,6 +1,6 @@
 """The candidate explanations of a gap, each a family of models with a few fitted parameters.
 
-A candidate is the base model plus one MODEL.md §8 effect whose *identifying* parameters are fitted
+A candidate is the base model plus one docs/model.md §8 effect whose *identifying* parameters are fitted
 (the others keep the library's calibrated defaults), or the control ``recalibrate_base`` (no effect;
 the uncertain base parameters b*_int, c, φ, K are fitted: the gap that mere tuning closes), or
 ``none`` (the base model as is). Parameters are searched in a unit cube: each maps to its physical
@@ -169,7 +169,7 @@ class Candidate:
 
 
 def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
-    """The candidates of a diagnosis (effects in MODEL.md §8 order, then the control, then ``none``)."""
+    """The candidates of a diagnosis (effects in docs/model.md §8 order, then the control, then ``none``)."""
     viscous = internal_resistance == "viscous"
     return [
         Candidate("slip_sinkage", (ParamSpec("sinkage_rate", 0.02, 3.0, True, "1/m"),

@@ -1,5 +1,5 @@
 """``diagnose``: where the simulation disagrees with field logs, which unmodelled effect explains it,
-and how far the gap closes once that effect is added (MODEL.md §8).
+and how far the gap closes once that effect is added (docs/model.md §8).
 
 1. **Where** — every test is replayed on the base model; the gap is measured per test × signal ×
    phase (:mod:`.phases`, :mod:`.metrics`) and the cells that carry it are named.
@@ -25,8 +25,17 @@ from .batch import FIT_SUBSTEP, BatchSimulator
 from .candidates import NONE, RECALIBRATE, candidate_set
 from .data import DiagnosisError, TestData, load_tests
 from .fit import CandidateFit, fit_candidate, make_folds
-from .metrics import (cell_ci, cell_table, gap_carriers, overall_gap, overall_gap_range, overall_nrmse,
-                      signal_error, signal_weight, sq_errors)
+from .metrics import (
+    cell_ci,
+    cell_table,
+    gap_carriers,
+    overall_gap,
+    overall_gap_range,
+    overall_nrmse,
+    signal_error,
+    signal_weight,
+    sq_errors,
+)
 from .stats import ALPHA, block_draws, block_length, centred_interval, dm_test, gap_test, noise_ar1
 
 COMPLEXITY = 0.02
@@ -284,7 +293,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     """Diagnose the gap between the simulator and the field tests in ``folder`` (one sub-folder per test).
 
     Args:
-        folder: a folder of MODEL.md §9 field-log folders (or one field-log folder).
+        folder: a folder of docs/model.md §9 field-log folders (or one field-log folder).
         out_dir: where ``report.md``, ``report.json`` and the figures go (``None``: nothing written).
         tests: only these sub-folders. internal_resistance: the base model's (``constant``/``viscous``).
         candidates: restrict the candidate set (names from :func:`.candidates.candidate_set`;

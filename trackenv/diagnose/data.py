@@ -1,4 +1,4 @@
-"""Field tests for a diagnosis: read a folder of MODEL.md §9 logs, check them, estimate their noise.
+"""Field tests for a diagnosis: read a folder of docs/model.md §9 logs, check them, estimate their noise.
 
 A diagnosis folder holds one sub-folder per field test (``log.csv`` + ``meta.json``); a folder that
 is itself a field log is a diagnosis of that one test. Every sub-folder is read with

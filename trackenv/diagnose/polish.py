@@ -117,7 +117,7 @@ class _Problem:
                 test = sim.tests[j]
                 i0, w = sim._interp[j]
                 cols = slice(q * F, (q + 1) * F)
-                at = lambda x: x[i0, cols] * (1.0 - w) + x[i0 + 1, cols] * w  # noqa: E731  (K, F)
+                at = lambda x, i0=i0, cols=cols, w=w: x[i0, cols] * (1.0 - w) + x[i0 + 1, cols] * w  # noqa: E731  (K, F)
                 pose = None
                 for s in test.measured:
                     if s in ("x", "y", "heading"):

@@ -134,7 +134,7 @@ def write_report(diag, out: Path, figures: bool = True) -> dict:
           f"({v['gap_test']['cells']} test x signal cells). Rule: {rep['method']['rule']}"]
     L += ["", "## Where the gap lies", ""]
     if rep["gap_cells"]:
-        L += ["| test | signal | phase | t [s] | NRMSE | systematic gap | bias | lag [s] | share |", "|---|---|---|---|---|---|---|---|---|"]
+        L += ["| test | signal | phase | t [s] | NRMSE | systematic gap | bias | lag [s] | share |", "|---|---|---|---|---|---|---|---|---|"]  # noqa: E501
         for c in rep["gap_cells"]:
             lag = "–" if c["lag_before_s"] is None else f"{c['lag_before_s']:+.2f}"
             L.append(f"| {c['test']} | {c['signal']} | {c['phase']} | {c['t_start']:.1f}-{c['t_end']:.1f} | "

@@ -1,4 +1,4 @@
-"""Unmodelled effects (MODEL.md §8) that extend the base model through :class:`Effect`.
+"""Unmodelled effects (docs/model.md §8) that extend the base model through :class:`Effect`.
 
 ``EFFECTS`` maps each canonical id to its class; ``get_effect(id, **params)`` builds one with its
 calibrated defaults, overriding parameters by keyword (checked against the class's ``bounds``).
@@ -54,7 +54,7 @@ __all__ = ["resolve_effects", "Effect", "effect_ids", "EFFECTS", "EFFECT_IDS", "
 
 
 def resolve_effects(effects) -> tuple:
-    """Effect ids (MODEL.md §8) or :class:`Effect` modules -> a tuple of modules for ``load_params``.
+    """Effect ids (docs/model.md §8) or :class:`Effect` modules -> a tuple of modules for ``load_params``.
 
     Ids get their default parameters (:func:`get_effect`); an unknown id raises ``ValueError``
     listing the known ones; anything that is neither raises ``TypeError``. A single id or module may be
@@ -69,6 +69,6 @@ def resolve_effects(effects) -> tuple:
         elif isinstance(e, Effect):
             out.append(e)
         else:
-            raise TypeError(f"effects must be MODEL.md §8 ids or Effect modules, got {e!r}")
+            raise TypeError(f"effects must be docs/model.md §8 ids or Effect modules, got {e!r}")
     effect_ids(out)
     return tuple(out)

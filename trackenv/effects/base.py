@@ -1,4 +1,4 @@
-"""The extension point for unmodelled effects (MODEL.md §8).
+"""The extension point for unmodelled effects (docs/model.md §8).
 
 An effect is an :class:`equinox.Module` whose fields are its parameters (array leaves: batchable and
 differentiable) and whose class attribute ``id`` is its canonical id. It joins a simulation through

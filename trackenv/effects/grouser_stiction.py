@@ -1,4 +1,4 @@
-"""``grouser_stiction``: breakaway resistance of grousers on the asperities of hard ground (MODEL.md §8).
+"""``grouser_stiction``: breakaway resistance of grousers on the asperities of hard ground (docs/model.md §8).
 
 Evidence (thesis §5.3.4): in the zero-radius turn on asphalt the start of the turn was hindered,
 the simulated transient too fast. Grousers resting against asperities of a hard surface must be lifted
@@ -16,7 +16,8 @@ are hardly changed while the breakaway is slowed.
 
 Default (calibration, asphalt ZRT ±12 V, 0.3 s ramp): M0 = 18 N m, r_s = 0.05 rad/s,
 r_fade = 1.5 rad/s, F0 = 0 (no straight-line evidence), u_s = 0.02 m/s, u_fade = 0.2 m/s; the time to
-reach 90% of the steady yaw rate grows from 0.85 s to 1.35 s (1.6x) while the steady yaw rate changes by 0.7%; M0 >~ 21 N m blocks the turn (the breakaway exceeds the drive moment)
+reach 90% of the steady yaw rate grows from 0.85 s to 1.35 s (1.6x) while the steady yaw rate changes by 0.7%; M0 >~
+21 N m blocks the turn (the breakaway exceeds the drive moment)
 (see tests/effects/test_grouser_stiction.py and the report).
 """
 

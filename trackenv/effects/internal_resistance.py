@@ -1,6 +1,6 @@
-"""``internal_resistance``: the form of the internal track resistance (MODEL.md §8).
+"""``internal_resistance``: the form of the internal track resistance (docs/model.md §8).
 
-Force law (replaces the base model's tau_int of MODEL.md §5 through the ``forces`` hook)::
+Force law (replaces the base model's tau_int of docs/model.md §5 through the ``forces`` hook)::
 
     tau_int(omega) = b0 * smoothsign(omega; 0.05 rad/s) + b1 * omega + b2 * omega |omega|     [N m]
 
@@ -19,7 +19,7 @@ At steady straight driving the sprocket balance (4.1) gives the current
 
 with tau_back = r_s' * (compaction resistance)/1 per track (the small traction term).
 
-Default (calibration): least squares to the two field anchors of thesis §5.4.1 (MODEL.md §8):
+Default (calibration): least squares to the two field anchors of thesis §5.4.1 (docs/model.md §8):
 1.98 A at 1.1 m/s (11.8 V) and 2.23 A at 2 m/s (21 V) on dry sand, with b1 >= 0. The measured
 current rises *less* with speed than b_eff alone predicts, so the fit lands on b1 = 0 (a constant law)
 with a larger constant b0 = 0.88 N m than Table 5.4's 0.78 N m; the viscous law (≈3.1 A at 2 m/s)

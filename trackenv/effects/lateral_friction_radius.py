@@ -1,4 +1,4 @@
-"""``lateral_friction_radius``: lateral resistance from a turning-radius-dependent coefficient (MODEL.md §8).
+"""``lateral_friction_radius``: lateral resistance from a turning-radius-dependent coefficient (docs/model.md §8).
 
 Thesis §3.4.4 (3.24) and §6.1.2: F_Lat,i = μ_t(ρ) F_n,i, the lateral coefficient falling with the turning
 radius (Kar 1987, "Prediction of track forces in skid-steering of military tracked vehicles",

@@ -1,4 +1,4 @@
-"""``pitch_load_transfer``: longitudinal load transfer in acceleration and braking (MODEL.md §4, §8).
+"""``pitch_load_transfer``: longitudinal load transfer in acceleration and braking (docs/model.md §4, §8).
 
 The planar base model keeps p_x = 0; the thesis's ADAMS body pitched. Here the pressure under the tracks
 gets a longitudinal gradient p_x from the pitch-moment balance of the rigid body about its CG (Wong,

@@ -1,4 +1,4 @@
-"""``sensor_artifacts``: what the field instruments add to the truth (MODEL.md §7, §8; thesis §4.3.2, §5.3.3).
+"""``sensor_artifacts``: what the field instruments add to the truth (docs/model.md §7, §8; thesis §4.3.2, §5.3.3).
 
 Instrument hook only (the dynamics are untouched):
 

@@ -1,4 +1,4 @@
-"""``slip_sinkage``: slip-induced sinkage and the bulldozing resistance of the displaced soil (MODEL.md §8).
+"""``slip_sinkage``: slip-induced sinkage and the bulldozing resistance of the displaced soil (docs/model.md §8).
 
 Evidence (thesis §5.3.4): in the zero-radius turn on dry sand the simulated yaw rate was ≈ 11× the
 measured one; the vehicle dug itself 2-3 in into the sand and could not turn after ~20 s. Sliding

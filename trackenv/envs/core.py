@@ -44,17 +44,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..effects import resolve_effects
 from ..integrate import advance_constant, is_physical
 from ..params import Params, load_params
 from ..physics.model import State, initial_state
-from ..effects import resolve_effects
 from ..simulate import DEFAULT_SUBSTEP, check_substep, n_substeps
+from . import randomization
+from .tasks import TASKS, Task
 
 # Environments default to simulate's verified substep (the convergence study, README Numerics):
 # no faster default that is off the reference. Pass substep= to trade accuracy for speed.
 ENV_DEFAULT_SUBSTEP = DEFAULT_SUBSTEP  # s
-from . import randomization
-from .tasks import TASKS, Task
 
 F32 = jnp.float32
 
@@ -114,7 +114,7 @@ class EnvParams(eqx.Module):
 class EnvState(eqx.Module):
     """State of one environment (add a leading axis for a batch)."""
 
-    physics: State  # vehicle state (MODEL.md §1)
+    physics: State  # vehicle state (docs/model.md §1)
     sim: Params  # this episode's (possibly randomised) simulation parameters
     task: dict  # task state: targets, reference path
     dr_values: jax.Array  # (n_dr,) the sampled parameter values
@@ -160,7 +160,7 @@ def make_params(
     ``max_time``, ``reward`` = dict of :class:`RewardParams` fields); see each task class.
     ``sim_params`` overrides terrain/vehicle/internal_resistance/effects with a ready ``Params``.
     ``physics_batching``: 'vmap' (default) lets ``jax.vmap`` batch the integrator; 'native' puts the
-    batch on the last axis of the physics arrays inside a vmapped step (MODEL.md §6), which can be
+    batch on the last axis of the physics arrays inside a vmapped step (docs/model.md §6), which can be
     faster for large batches.
     """
     if task not in TASKS:
@@ -220,7 +220,7 @@ def advance_with_energy(physics: State, volts, sim: Params, dt: float, substeps:
 
 
 def _native_rule(dt, substeps, axis_size, in_batched, physics, volts, sim):
-    """vmap rule: run the integrator natively with the batch on the last axis (MODEL.md §6)."""
+    """vmap rule: run the integrator natively with the batch on the last axis (docs/model.md §6)."""
     pb, vb, sb = in_batched
 
     def last(x, batched, broadcast):

@@ -4,13 +4,14 @@ One environment is one vehicle. Each ``step`` makes exactly one call of a jitted
 (physics + task + observation + reward + packing) and one device-to-host transfer of a single
 float32 vector, which is then split into the observation, the reward, the flags and ``info``.
 The jitted functions are cached by structure and take the parameters as an argument (flattened to
-two vectors, see :mod:`.flat`), so every environment with the same structure (task, substeps, effects, randomised parameter names) shares one compiled
+two vectors, see :mod:`.flat`), so every environment with the same structure (task, substeps, effects, randomised
+parameter names) shares one compiled
 program, and nothing recompiles after the first step (dtypes and weak types are pinned).
 
 Options (keyword arguments of ``gym.make``):
 
 - ``terrain``: any ``configs/terrain`` id (``dry_sand``, ``asphalt``, ``sandy_loam_1`` ...) or a YAML path;
-- ``effects``: ids of MODEL.md §8 (resolved through ``trackenv.effects``) or effect modules;
+- ``effects``: ids of docs/model.md §8 (resolved through ``trackenv.effects``) or effect modules;
 - ``control_dt``: control step [s], default 0.05; ``substep``: largest integration substep [s],
   default ``trackenv.envs.core.ENV_DEFAULT_SUBSTEP`` (the verified substep of ``simulate``, README),
   at most ``control_dt`` and ``trackenv.simulate.MAX_SUBSTEP`` (else ``ValueError``);
@@ -56,10 +57,9 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from .core import ENV_DEFAULT_SUBSTEP
 from . import core
+from .core import ENV_DEFAULT_SUBSTEP
 from .flat import FlatCodec, codecs
-
 
 _FNS: dict = {}
 

@@ -6,7 +6,7 @@ curve at every vertex. The polylines carry straight extensions before the start 
 so that projecting a vehicle that has overshot the end still gives a meaningful along-track
 position (``s`` larger than the path length) and a cross-track error to the extended line.
 
-Conventions (MODEL.md §1): world X/Y, heading psi counter-clockwise from X; curvature kappa > 0
+Conventions (docs/model.md §1): world X/Y, heading psi counter-clockwise from X; curvature kappa > 0
 turns left; the cross-track error is positive when the vehicle is to the *left* of the path.
 """
 

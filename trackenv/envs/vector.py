@@ -18,7 +18,7 @@ float32 array::
 - ``"disabled"``: no autoreset; reset ended environments with ``reset(options={"reset_mask": mask})``.
 
 ``physics_batching``: ``"vmap"`` (plain ``jax.vmap`` of the integrator), ``"native"`` (the vmapped
-step hands the physics to the integrator with the batch on the *last* axis of every array, MODEL.md §6,
+step hands the physics to the integrator with the batch on the *last* axis of every array, docs/model.md §6,
 through ``jax.custom_batching.custom_vmap``) or ``"auto"`` (default: native from 256 environments).
 
 ``info`` holds one array per metric (``success``, ``off_course``, ``diverged``, ``timeout``,
@@ -47,12 +47,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..parallel import shard
-from .core import ENV_DEFAULT_SUBSTEP
 from . import core
+from .core import ENV_DEFAULT_SUBSTEP
 from .flat import FlatCodec, codecs
 from .gym_env import Layout
 
-NATIVE_FROM = 256  # physics_batching="auto": batch-last layout from this many environments (MODEL.md §6)
+NATIVE_FROM = 256  # physics_batching="auto": batch-last layout from this many environments (docs/model.md §6)
 
 _MODES = {AutoresetMode.NEXT_STEP: "next_step", AutoresetMode.SAME_STEP: "same_step", AutoresetMode.DISABLED: "disabled"}
 
@@ -285,7 +285,7 @@ class TrackVectorEnv(VectorEnv):
     # -- helpers ---------------------------------------------------------------------------------
 
     def _pose(self, host):
-        for name, sl, shape in self._layout.physics:
+        for name, sl, _shape in self._layout.physics:
             if name == "pose":
                 return host[:, sl]
         raise RuntimeError("physics state not packed")

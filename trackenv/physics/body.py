@@ -1,4 +1,4 @@
-"""Planar rigid-body dynamics of the vehicle (MODEL.md §5). SI units."""
+"""Planar rigid-body dynamics of the vehicle (docs/model.md §5). SI units."""
 
 from __future__ import annotations
 

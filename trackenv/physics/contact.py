@@ -1,6 +1,6 @@
 """Track-terrain contact: kinematics, z*/z-bar logic, shear-displacement rates and contact forces.
 
-MODEL.md §3; thesis §3.4.2-3.4.6. Shapes follow ``trackenv.physics`` (element arrays (2, N, *b)).
+docs/model.md §3; thesis §3.4.2-3.4.6. Shapes follow ``trackenv.physics`` (element arrays (2, N, *b)).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from . import terramechanics as tm
 from .geometry import belt_radius, contact_area, contact_x, track_y
 
-# Smoothing constants of Table C.1 (MODEL.md §2), SI.
+# Smoothing constants of Table C.1 (docs/model.md §2), SI.
 LEADING_EDGE_SPEED = 1e-2  # m/s, Delta V_z: below it the leading edge follows the ground speed
 MIN_Z_STAR = 1e-6  # m, Delta Z: floor of z* in the decay rate |V_t|/z*
 SLIP_SAT_START, SLIP_SAT_END = 1e-3, 1.5e-2  # m/s, saturation of j_z (3.17)
@@ -39,7 +39,7 @@ class Kinematics(NamedTuple):
 
 
 def kinematics(vehicle, terrain, vel, omega, nb: int) -> Kinematics:
-    """Contact-point velocities, slip, and the z*/z-tilde coordinates (MODEL.md §3, §3.4.2.2, 3.28-3.32)."""
+    """Contact-point velocities, slip, and the z*/z-tilde coordinates (docs/model.md §3, §3.4.2.2, 3.28-3.32)."""
     u, v, r = vel[0], vel[1], vel[2]
     x = contact_x(vehicle, nb)
     y = track_y(vehicle, nb)

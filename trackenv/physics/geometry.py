@@ -1,4 +1,4 @@
-"""Contact-point geometry of the two tracks (MODEL.md §1, App. C.2). SI units."""
+"""Contact-point geometry of the two tracks (docs/model.md §1, App. C.2). SI units."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Normal load distribution under the tracks (MODEL.md §4; replaces ADAMS's contact springs, §3.4.1)."""
+"""Normal load distribution under the tracks (docs/model.md §4; replaces ADAMS's contact springs, §3.4.1)."""
 
 from __future__ import annotations
 

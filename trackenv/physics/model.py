@@ -1,6 +1,6 @@
 """The assembled vehicle model: state pytree and state derivative, with the effect hooks.
 
-The derivative is returned split for exponential integration (MODEL.md §6): for the stiff linear
+The derivative is returned split for exponential integration (docs/model.md §6): for the stiff linear
 terms (motor current, shear displacements) ``dynamics`` returns the *non-stiff drive* N(x) and,
 separately, the decay rates lambda, so that dx/dt = N(x) - lambda x; for every other state N is
 the whole derivative.
@@ -18,14 +18,14 @@ from . import body, contact, loads, motor
 
 
 class State(eqx.Module):
-    """Vehicle state (MODEL.md §1), SI units. Shapes carry a trailing batch shape ``*b``.
+    """Vehicle state (docs/model.md §1), SI units. Shapes carry a trailing batch shape ``*b``.
 
     pose: (3, *b) X [m], Y [m], psi [rad] (world frame, psi counter-clockwise from X).
     vel: (3, *b) u, v [m/s] (body frame, CG), r [rad/s].
     omega: (2, *b) sprocket speeds, left/right [rad/s].
     current: (2, *b) motor currents, left/right [A] (signed).
     jz, jx: (2, N, *b) longitudinal / lateral shear displacement at each contact point [m].
-    extra: ``{effect id: pytree}`` states added by effects (MODEL.md §8).
+    extra: ``{effect id: pytree}`` states added by effects (docs/model.md §8).
     """
 
     pose: jax.Array
@@ -52,8 +52,8 @@ def initial_state(params, batch_shape: tuple[int, ...] = (), pose=None, vel=None
         if s is not None:
             extra[effect.id] = s
     return State(
-        pose=z(3) if pose is None else jnp.broadcast_to(jnp.asarray(pose, dtype).reshape((3,) + (1,) * len(batch_shape)), (3,) + tuple(batch_shape)),
-        vel=z(3) if vel is None else jnp.broadcast_to(jnp.asarray(vel, dtype).reshape((3,) + (1,) * len(batch_shape)), (3,) + tuple(batch_shape)),
+        pose=z(3) if pose is None else jnp.broadcast_to(jnp.asarray(pose, dtype).reshape((3,) + (1,) * len(batch_shape)), (3,) + tuple(batch_shape)),  # noqa: E501
+        vel=z(3) if vel is None else jnp.broadcast_to(jnp.asarray(vel, dtype).reshape((3,) + (1,) * len(batch_shape)), (3,) + tuple(batch_shape)),  # noqa: E501
         omega=z(2),
         current=z(2),
         jz=z(2, n),
@@ -110,7 +110,7 @@ def evaluate(state: State, voltage, params) -> Evaluation:
     for effect in params.effects:
         forces, tau_int = effect.forces(ctx, forces, tau_int)
 
-    # Rigid body (MODEL.md §5)
+    # Rigid body (docs/model.md §5)
     track_fx = forces.longitudinal.sum(axis=1) + forces.compaction  # (2, *b)
     force_x = track_fx.sum(axis=0) + forces.body_x
     force_y = forces.lateral.sum(axis=(0, 1)) + forces.body_y
@@ -133,7 +133,7 @@ def evaluate(state: State, voltage, params) -> Evaluation:
 
 
 def decay_rates(params, kin: contact.Kinematics, belt_speed):
-    """Decay rates (lambda) of the stiff states: current R_m/L_m, shear |V_t|/z* (MODEL.md §6)."""
+    """Decay rates (lambda) of the stiff states: current R_m/L_m, shear |V_t|/z* (docs/model.md §6)."""
     lam_z, lam_x = contact.shear_decay_rates(belt_speed, kin)
     return motor.current_decay_rate(params.vehicle), lam_z, lam_x
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from .terramechanics import smoothsign, step5_slope
 
-OMEGA_SMOOTHING = 0.05  # rad/s, width of smoothsign(omega) for stiction and b*_int (MODEL.md §5)
+OMEGA_SMOOTHING = 0.05  # rad/s, width of smoothsign(omega) for stiction and b*_int (docs/model.md §5)
 
 
 def internal_resistance_torque(internal, omega):

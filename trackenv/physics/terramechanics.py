@@ -22,7 +22,7 @@ def step5_slope(x, x0, h0, x1, h1):
 
 
 def smoothsign(x, a):
-    """Smooth sign function STEP5(x, -a, -1, a, 1) (MODEL.md §3)."""
+    """Smooth sign function STEP5(x, -a, -1, a, 1) (docs/model.md §3)."""
     return step5(x, -a, -1.0, a, 1.0)
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 F32 = jnp.float32
 
-# Overall PackBot footprint for gates and drawings: 27 in x 16 in (the box of MODEL.md §2's yaw inertia).
+# Overall PackBot footprint for gates and drawings: 27 in x 16 in (the box of docs/model.md §2's yaw inertia).
 FOOTPRINT_LENGTH = 0.6858  # m, 27 in
 FOOTPRINT_WIDTH = 0.4064  # m, 16 in
 

@@ -9,8 +9,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..paths import wrap_angle
-from .base import (RewardParams, Task, TaskEval, as_range, as_scalar, braking_speed, is_stopped, kernel,
-                   obs_bounds, reward_params, sample, split_task_kwargs)
+from .base import (
+    RewardParams,
+    Task,
+    TaskEval,
+    as_range,
+    as_scalar,
+    braking_speed,
+    is_stopped,
+    kernel,
+    obs_bounds,
+    reward_params,
+    sample,
+    split_task_kwargs,
+)
 
 _OBS = [
     ("speed_error", -5.0, 5.0),  # m/s, v_ref - u
@@ -71,7 +83,7 @@ class GoStop(Task):
                     reward=None)
 
     @classmethod
-    def create(cls, **kwargs) -> tuple["GoStop", float]:
+    def create(cls, **kwargs) -> tuple[GoStop, float]:
         o = split_task_kwargs(cls.DEFAULTS, kwargs, "GoStop")
         task = cls(
             reward=o["reward"] if isinstance(o["reward"], RewardParams) else reward_params(**(o["reward"] or {})),

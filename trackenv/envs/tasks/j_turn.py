@@ -10,8 +10,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import paths
-from .base import (RewardParams, Task, TaskEval, as_range, as_scalar, braking_speed, is_stopped, kernel,
-                   obs_bounds, reward_params, sample, split_task_kwargs)
+from .base import (
+    RewardParams,
+    Task,
+    TaskEval,
+    as_range,
+    as_scalar,
+    braking_speed,
+    is_stopped,
+    kernel,
+    obs_bounds,
+    reward_params,
+    sample,
+    split_task_kwargs,
+)
 
 _OBS = [
     ("speed_error", -5.0, 5.0),  # m/s, v_ref - u

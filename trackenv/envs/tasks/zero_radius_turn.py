@@ -7,8 +7,19 @@ import math
 import jax
 import jax.numpy as jnp
 
-from .base import (RewardParams, Task, TaskEval, as_range, as_scalar, is_stopped, kernel, obs_bounds,
-                   reward_params, sample, split_task_kwargs)
+from .base import (
+    RewardParams,
+    Task,
+    TaskEval,
+    as_range,
+    as_scalar,
+    is_stopped,
+    kernel,
+    obs_bounds,
+    reward_params,
+    sample,
+    split_task_kwargs,
+)
 
 _OBS = [
     ("yaw_rate_error", -30.0, 30.0),  # rad/s, r_ref - r
