@@ -80,13 +80,18 @@ def test_candidate_anchors_reproduce_the_base_model():
         pred, div = sim.run(cand, cand.physical(cand.anchor_unit()[None]))
         assert not div.any()
         for j in range(len(tests)):
+            # Compared until 0.2 s after the voltages reach zero, as in the convergence test: once a turned
+            # vehicle has stopped on asphalt the tracks chatter in stick-slip around zero speed, where float32
+            # rounding differences grow (README, Numerics); that phase is checked for boundedness only.
+            driven = np.abs(tests[j].volts).max(axis=1) > 0.05
+            window = tests[j].t <= tests[j].t[driven].max() + 0.2
             for sig in base[j]:
-                # equal up to float32 rounding, which the stick-slip balance at the final stop can amplify at a
-                # few samples: RMS difference ≤ 0.2 % and largest ≤ 2 % of the signal's range
+                # equal up to float32 rounding: RMS difference ≤ 0.2 % and largest ≤ 2 % of the signal's range
                 d = pred[j][sig][:, 0] - base[j][sig][:, 0]
                 span = tests[j].span[sig]
-                assert np.sqrt(np.mean(d**2)) <= 2e-3 * span + 1e-4, (cand.name, sig)
-                assert np.max(np.abs(d)) <= 2e-2 * span + 1e-4, (cand.name, sig)
+                assert np.sqrt(np.mean(d[window] ** 2)) <= 2e-3 * span + 1e-4, (cand.name, sig)
+                assert np.max(np.abs(d[window])) <= 2e-2 * span + 1e-4, (cand.name, sig)
+                assert np.all(np.abs(d[~window]) <= 0.25 * span), (cand.name, sig)
 
 
 def test_gap_test_detects_a_small_systematic_bias_and_passes_pure_noise():
