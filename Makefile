@@ -16,7 +16,7 @@ demo: $(STAMP)
 	$(BIN)/trackenv demo --out out/demo
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20 --nbmake tests notebooks
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20 --nbmake --nbmake-timeout=1200 tests notebooks
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

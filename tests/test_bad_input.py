@@ -474,3 +474,18 @@ def test_force_overrides_the_guard_and_own_output_is_reused(tmp_path):
     assert json.loads((b / MANIFEST).read_text())["command"] == "replay"
     assert json.loads((b / "meta.json").read_text())["simulated"] is True
     assert cli("replay", a, "--out", b).rc == 0  # now trackenv's own output folder
+
+
+def test_float32_values_at_a_bound_are_accepted():
+    """A float32 leaf equal to a decimal bound (float32(0.1) > 0.1 in float64) lies on the bound, not above it."""
+    import jax.numpy as jnp
+
+    from trackenv.effects import SlipSinkage
+
+    f = jnp.float32
+    SlipSinkage(sinkage_rate=f(0.3), max_sinkage=f(0.1), unit_weight=f(15e3), bulldozing_factor=f(1.0),
+                side_speed_smoothing=f(0.01))
+    te.replace(te.load_params("dry_sand"), **{"terrain.friction_angle": f(0.6)})
+    with pytest.raises(ValueError, match="max_sinkage"):
+        SlipSinkage(sinkage_rate=f(0.3), max_sinkage=f(0.1001), unit_weight=f(15e3), bulldozing_factor=f(1.0),
+                    side_speed_smoothing=f(0.01))

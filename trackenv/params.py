@@ -294,10 +294,16 @@ def check_value(path: str, value: Any, where: str = "", *, label: str | None = N
                           f"got {value!r}") from None
     flat = arr.reshape(-1)
     bad = ~np.isfinite(flat)
+    # compare in the value's own precision: a float32 leaf of 0.1 is float32(0.1), not above a bound of 0.1
+    own = np.asarray(value).dtype
+    prec = own if np.issubdtype(own, np.floating) else np.float64
+    cmp = flat.astype(prec)
     if lo is not None:
-        bad |= (flat <= lo) if lo_strict else (flat < lo)
+        lo_p = np.asarray(lo, prec)
+        bad |= (cmp <= lo_p) if lo_strict else (cmp < lo_p)
     if hi is not None:
-        bad |= (flat >= hi) if hi_strict else (flat > hi)
+        hi_p = np.asarray(hi, prec)
+        bad |= (cmp >= hi_p) if hi_strict else (cmp > hi_p)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         scale, unit = display

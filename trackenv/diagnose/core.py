@@ -36,7 +36,18 @@ from .metrics import (
     signal_weight,
     sq_errors,
 )
-from .stats import ALPHA, block_draws, block_length, centred_interval, dm_test, gap_test, noise_ar1
+from .stats import (
+    ALPHA,
+    block_draws,
+    block_length,
+    centred_interval,
+    gap_test,
+    max_t_pvalue,
+    noise_ar1,
+    paired_covariance,
+    paired_terms,
+    paired_test,
+)
 
 COMPLEXITY = 0.02
 MIN_SHRINK = 0.10
@@ -44,17 +55,19 @@ SENSOR = "sensor_artifacts"
 N_BOOT = 300
 
 RULE_TEXT = (
-    "An effect is named only if all of these hold (alpha = 0.05, Bonferroni over the m effect candidates "
-    "fitted): (1) the base model's gap is real: the AR(1)-noise chi-square test of its residuals, "
-    "Bonferroni-combined over test x signal, has p < alpha; (2) the effect with the lowest held-out loss "
-    "beats `none` on the held-out samples by a Diebold-Mariano test (Newey-West variance, bandwidth >= 2 "
-    "correlation times) with p < alpha/m; (3) it beats the `recalibrate_base` control the same way "
-    "(p < alpha/m), else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does "
-    "not beat `sensor_artifacts` (p < alpha/m) gives way to it if `sensor_artifacts` itself passes (2)-(3); "
-    "(5) its held-out gap shrink is at least 10%. Otherwise `none`, with the reason. Confidence: "
-    "1 - m * (largest p-value the named effect had to pass), for `none` the smallest such value of any "
-    "effect (capped at 1), times 0.7 for a single test, 0.5 when a control was not fitted, 0.8 when the "
-    "fit did not converge.")
+    "An effect is named only if all of these hold, each at alpha = 0.05 (an intersection-union rule: naming an "
+    "effect when none beats the base model, or when tuning the base parameters does as well, has probability "
+    "<= alpha): (1) the base model's gap is real: the AR(1)-noise chi-square test of its residuals, "
+    "Bonferroni-combined over test x signal, has p < alpha; (2) the effect with the lowest held-out score "
+    "beats `none` on the held-out samples: a fixed-design paired test whose variance is the instruments' "
+    "AR(1) noise projected on the two predictions' difference, max-T corrected over all effect candidates "
+    "(p < alpha); (3) it beats the `recalibrate_base` control the same way (max-T over the effects, p < alpha), "
+    "else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does not beat "
+    "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
+    "itself passes (2)-(3); (5) its held-out gap shrink is at least 10%. Otherwise `none`, with the reason. "
+    "Confidence: 1 - (largest corrected p-value the named effect had to pass); for `none`, the smallest such "
+    "value of any effect; times 0.7 for a single test, 0.5 when a control was not fitted, 0.8 when the fit did "
+    "not converge.")
 
 
 @dataclass
@@ -110,6 +123,20 @@ def gap_cells(data: list[TestData], base_pred: list[dict]) -> list[dict]:
     return cells
 
 
+def noise_models(data: list[TestData], cells: list[dict]) -> list[dict]:
+    """Per test, per signal: (σ, ρ) of the AR(1) noise model (from the gap test's cells; where the residual's
+    σ is not positive, the log's own white-noise level with ρ = 0)."""
+    by = {(c["test"], c["signal"]): (c["sigma"], c["rho"]) for c in cells}
+    out = []
+    for t in data:
+        d = {}
+        for sig in t.measured:
+            sigma, rho = by.get((t.name, sig), (float("nan"), 0.0))
+            d[sig] = (float(sigma), float(rho)) if np.isfinite(sigma) and sigma > 0 else (float(t.noise[sig]), 0.0)
+        out.append(d)
+    return out
+
+
 def evidence(data: list[TestData], fits: dict) -> dict:
     """What the verdict rule needs, per candidate and per sample (JSON/npz-cacheable: see :func:`save_evidence`)."""
     masks = fits[NONE].heldout_masks  # every candidate has the same folds, hence the same masks
@@ -120,11 +147,20 @@ def evidence(data: list[TestData], fits: dict) -> dict:
     gap_before = overall_gap(data, sq_base)
     gap_before_held = overall_gap(data, sq_base_held)
     cells = gap_cells(data, fits[NONE].full_pred)
+    # signed held-out errors on samples every candidate predicts (finite), for the paired tests
+    err = {n: [{sig: signal_error(t, sig, f.heldout_pred[j][sig]) for sig in t.measured} for j, t in enumerate(data)]
+           for n, f in fits.items()}
+    for j, t in enumerate(data):
+        for sig in t.measured:
+            ok = masks[j] & t.fit_mask & np.all([np.isfinite(err[n][j][sig]) for n in fits], axis=0)
+            for n in fits:
+                err[n][j][sig] = np.where(ok, err[n][j][sig], np.nan)
     ev = {"tests": [t.name for t in data], "n_tests": len(data), "gap_cells_tested": len(cells),
           "gap_p": min(1.0, min(c["p"] for c in cells) * len(cells)) if cells else 1.0,
           "gap_z_max": max((c["z"] for c in cells), default=0.0), "gap_cells": cells,
           "gap_before": gap_before, "gap_before_heldout": gap_before_held, "candidates": {},
-          "ws_held": {}, "ws_full": {}, "_sq_base": sq_base, "_sq_base_held": sq_base_held,
+          "noise": noise_models(data, cells), "weights": [{sig: signal_weight(t, sig) for sig in t.measured} for t in data],
+          "err_held": err, "ws_held": {}, "ws_full": {}, "_sq_base": sq_base, "_sq_base_held": sq_base_held,
           "_sq_held": {}, "_sq_full": {}}
     for n, f in fits.items():
         sq_h = _masked(sq_errors(data, f.heldout_pred), masks)
@@ -141,39 +177,61 @@ def evidence(data: list[TestData], fits: dict) -> dict:
             "heldout_loss": float(sum(np.nanmean(x) for x in ev["ws_held"][n])),
         }
     for n in fits:
-        d = dm_test(ev["ws_held"][n], ev["ws_held"][NONE]) if n != NONE else {"z": 0.0, "p": 1.0}
+        d = compare(ev, n, NONE) if n != NONE else {"z": 0.0, "p": 1.0}
         ev["candidates"][n]["p_beats_none"], ev["candidates"][n]["z_beats_none"] = d["p"], d["z"]
     return ev
+
+
+def compare(ev: dict, a: str, b: str) -> dict:
+    """The paired test of "candidate ``a`` predicts the held-out samples better than ``b``" (:func:`.stats.paired_test`)."""
+    return paired_test(ev["err_held"][a], ev["err_held"][b], ev["noise"], ev["weights"])
+
+
+def family_pvalue(ev: dict, chosen: str, ref: str, family: list[str]) -> float:
+    """p-value of "``chosen`` beats ``ref``", max-T corrected over ``family`` (:func:`.stats.max_t_pvalue`)."""
+    zs, terms = {}, {}
+    for n in dict.fromkeys([*family, chosen]):
+        if n == ref:
+            continue
+        D, tm = paired_terms(ev["err_held"][n], ev["err_held"][ref], ev["noise"], ev["weights"])
+        V = paired_covariance(tm, tm)
+        if V > 0 and np.isfinite(V):
+            zs[n], terms[n] = D / np.sqrt(V), (tm, V)
+    if chosen not in zs:
+        return 1.0
+    names = list(zs)
+    corr = np.array([[paired_covariance(terms[a][0], terms[b][0]) / np.sqrt(terms[a][1] * terms[b][1])
+                      for b in names] for a in names])
+    return max_t_pvalue(zs[chosen], corr)
 
 
 def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> dict:
     """The verdict rule (``RULE_TEXT``) on evidence from :func:`evidence` (or :func:`load_evidence`)."""
     cand = ev["candidates"]
-    ws = ev["ws_held"]
     score = {n: c["heldout_loss"] * (1.0 + COMPLEXITY * c["n_params"]) for n, c in cand.items()}
     best = min(score, key=score.get)
     effects = [n for n, c in cand.items() if c["is_effect"]]
-    m = max(len(effects), 1)
-    a = alpha / m
+    physical = [n for n in effects if n != SENSOR]
     tests = {}
 
-    def p_of(x, y):
-        key = f"{x} vs {y}"
+    def p_of(x, ref, family):
+        key = f"{x} vs {ref}"
         if key not in tests:
-            tests[key] = dm_test(ws[x], ws[y])["p"] if y in ws else None
+            tests[key] = family_pvalue(ev, x, ref, family) if ref in cand else None
         return tests[key]
 
-    out = {"best": best, "m": m, "gap_p": ev["gap_p"], "gap_significant": ev["gap_p"] < alpha, "tests": tests}
+    out = {"best": best, "m": len(effects), "gap_p": ev["gap_p"], "gap_significant": ev["gap_p"] < alpha,
+           "tests": tests}
 
     def passes(e):
         """(passes (2)-(3), the largest p it had to pass, why not)."""
-        pn = p_of(e, NONE)
-        if pn >= a:
-            return False, pn, f"{e} does not beat the base model on held-out data (Diebold-Mariano p = {pn:.2g} ≥ {a:.2g})"
-        pr = p_of(e, RECALIBRATE) if RECALIBRATE in ws else None
-        if pr is not None and pr >= a:
-            return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ {a:.2g}): "
-                                        "a gap that tuning closes")
+        pn = p_of(e, NONE, effects)
+        if pn >= alpha:
+            return False, pn, f"{e} does not beat the base model on held-out data (paired test, max-T p = {pn:.2g} ≥ {alpha:.2g})"
+        pr = p_of(e, RECALIBRATE, effects)
+        if pr is not None and pr >= alpha:
+            return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ "
+                                        f"{alpha:.2g}): a gap that tuning closes")
         return True, max(pn, pr if pr is not None else 0.0), ""
 
     if not effects:
@@ -182,32 +240,31 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
         return {**out, "effect": NONE, "confidence": min(1.0, ev["gap_p"]),
                 "reason": f"the base model's gap is within the noise (AR(1) chi-square test, p = {ev['gap_p']:.2g})",
                 "p_used": ev["gap_p"]}
-    physical = [n for n in effects if n != SENSOR]
     e = min(physical, key=score.get) if physical else SENSOR
     ok, p_used, why = passes(e)
-    if SENSOR in ws and e != SENSOR:
-        ps = p_of(e, SENSOR)
-        if ps >= a:
+    if SENSOR in cand and e != SENSOR:
+        ps = p_of(e, SENSOR, physical)
+        if ps >= alpha:
             ok_s, p_s, why_s = passes(SENSOR)
             if ok_s:
                 e, ok, p_used, why = SENSOR, True, p_s, ""
             elif ok:
                 ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; p = {ps:.2g}"
-                                              f" ≥ {a:.2g})")
+                                              f" ≥ {alpha:.2g})")
         else:
             p_used = max(p_used, ps)
-    if not ok and SENSOR in ws and e != SENSOR:
+    if not ok and SENSOR in cand and e != SENSOR:
         ok_s, p_s, _ = passes(SENSOR)
         if ok_s and score[SENSOR] < score[NONE]:
             e, ok, p_used, why = SENSOR, True, p_s, ""
     if ok and cand[e]["heldout_shrink"] < min_shrink:
         ok, why = False, f"{e} closes only {100 * cand[e]['heldout_shrink']:.0f}% of the held-out gap (< {100 * min_shrink:.0f}%)"
     if ok:
-        return {**out, "effect": e, "reason": "passes the tests of the rule", "confidence": max(0.0, 1.0 - m * p_used),
+        return {**out, "effect": e, "reason": "passes the tests of the rule", "confidence": max(0.0, 1.0 - p_used),
                 "p_used": p_used}
     # none: confidence = how far the strongest effect was from passing
-    p_min = min((max(p_of(x, NONE), p_of(x, RECALIBRATE) or 0.0) for x in effects), default=1.0)
-    return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, m * p_min), "p_used": p_min}
+    p_min = min((max(p_of(x, NONE, effects), p_of(x, RECALIBRATE, effects) or 0.0) for x in effects), default=1.0)
+    return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, p_min), "p_used": p_min}
 
 
 def analysis_flags(data, fits, fits_applicable, chosen, restricted) -> list[str]:
@@ -260,7 +317,8 @@ def verdict_line(effect, confidence, shrink, ci, ins, ins_ci, reason, flags) -> 
 
 
 def save_evidence(ev: dict, path: Path) -> None:
-    """Cache the evidence (per-sample losses as npz, the rest as JSON) so that :func:`decide` re-runs in ms."""
+    """Cache the evidence (per-sample losses and signed held-out errors as npz, the rest as JSON) so that
+    :func:`decide` re-runs in milliseconds."""
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     arrs = {}
@@ -268,21 +326,38 @@ def save_evidence(ev: dict, path: Path) -> None:
         for n, lst in ev[kind].items():
             for j, x in enumerate(lst):
                 arrs[f"{kind}|{n}|{j}"] = x
+    for n, lst in ev["err_held"].items():
+        for j, d in enumerate(lst):
+            for sig, x in d.items():
+                arrs[f"err_held|{n}|{j}|{sig}"] = x
     np.savez_compressed(path / "evidence.npz", **arrs)
-    meta = {k: v for k, v in ev.items() if not k.startswith("_") and k not in ("ws_held", "ws_full")}
+    meta = {k: v for k, v in ev.items() if not k.startswith("_") and k not in ("ws_held", "ws_full", "err_held")}
     (path / "evidence.json").write_text(json.dumps(_clean(meta), indent=1) + "\n")
 
 
 def load_evidence(path: Path) -> dict:
+    """Evidence written by :func:`save_evidence`.
+
+    Raises:
+        DiagnosisError: the cache lacks the signed held-out errors (written by an earlier version: re-fit it).
+    """
     path = Path(path)
     ev = json.loads((path / "evidence.json").read_text())
-    ev["ws_held"], ev["ws_full"] = {}, {}
+    ev["ws_held"], ev["ws_full"], err = {}, {}, {}
     with np.load(path / "evidence.npz") as z:
         for key in z.files:
-            kind, n, j = key.split("|")
-            ev[kind].setdefault(n, {})[int(j)] = z[key]
+            kind, n, j, *sig = key.split("|")
+            if kind == "err_held":
+                err.setdefault(n, {}).setdefault(int(j), {})[sig[0]] = z[key]
+            else:
+                ev[kind].setdefault(n, {})[int(j)] = z[key]
+    if not err or "noise" not in ev:
+        raise DiagnosisError(f"{path}: the evidence cache has no signed held-out errors (an earlier format); "
+                             "delete it and run the diagnosis again")
     for kind in ("ws_held", "ws_full"):
         ev[kind] = {n: [d[j] for j in sorted(d)] for n, d in ev[kind].items()}
+    ev["err_held"] = {n: [d[j] for j in sorted(d)] for n, d in err.items()}
+    ev["noise"] = [{sig: tuple(v) for sig, v in d.items()} for d in ev["noise"]]
     return ev
 
 

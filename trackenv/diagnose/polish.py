@@ -33,6 +33,8 @@ from .candidates import Candidate
 from .metrics import signal_weight
 
 U_EPS = 1e-3
+SECANT_STEP = 0.05  # logit units (≈ 1.2 % of a parameter's range at mid-cube): the secant Jacobian's half-width
+JACOBIANS = ("secant", "forward")
 
 
 def _to_physical_jnp(spec, u):
@@ -86,8 +88,10 @@ class _Problem:
         self._fn = self._value_and_jac  # eager: the simulation inside is one jitted call whose JVP jax caches by shape
 
     def _predict(self, z):
-        """z (F, p) -> {(j, sig): (F, K_j)} predictions at the logs' sample times."""
-        sim, cand, F = self.sim, self.cand, self.F
+        """z (R, p), row r a point of fold r mod F -> {(j, sig): (R, K_j)} predictions at the logs' sample times."""
+        sim, cand = self.sim, self.cand
+        F = z.shape[0]  # rows simulated (a multiple of the number of folds)
+        windows = self.windows[np.arange(F) % self.F]
         u = jax.nn.sigmoid(z)
         vals = {s.name: _to_physical_jnp(s, u[:, k]) for k, s in enumerate(cand.specs)}
         out = {}
@@ -110,8 +114,8 @@ class _Problem:
                 traj = _simulate_jit(params, prof, initial_state(params, (nb * F,)), n_steps=b.n_steps,
                                      dt=float(b.dt), substeps=b.substeps)
                 ch = dict(traj.channels)
-                if np.any(self.windows > 0):
-                    win = jnp.asarray(np.tile(self.windows, nb), params.dtype)
+                if np.any(windows > 0):
+                    win = jnp.asarray(np.tile(windows, nb), params.dtype)
                     ch["speed_ideal"] = _encoder_average_jnp(t, ch["speed_ideal"], win)
             for q, j in enumerate(b.tests):
                 test = sim.tests[j]
@@ -141,7 +145,7 @@ class _Problem:
             e = pred[(j, s)] - jnp.asarray(meas, pred[(j, s)].dtype)[None]
             if s == "heading":
                 e = (e + jnp.pi) % (2 * jnp.pi) - jnp.pi
-            rs.append(e * jnp.asarray(coef, e.dtype))
+            rs.append(e * jnp.asarray(coef[np.arange(e.shape[0]) % self.F], e.dtype))
         return jnp.concatenate(rs, axis=1), pred
 
     def _value_and_jac(self, z):
@@ -151,13 +155,26 @@ class _Problem:
         J = jax.jacfwd(lambda d: g(d)[0])(jnp.zeros((p,), z.dtype))  # (F, N, p)
         return r, J, pred
 
-    def __call__(self, z):
-        r, J, pred = self._fn(jnp.asarray(z, jnp.float32))
+    def _value_and_secant(self, z):
+        """Residuals and the central-difference Jacobian over ±``SECANT_STEP`` in z: 2p + 1 points per fold, one
+        batched simulation."""
+        F, p = z.shape
+        shifts = np.concatenate([np.zeros((1, p)), SECANT_STEP * np.eye(p), -SECANT_STEP * np.eye(p)])
+        Z = (z[None] + jnp.asarray(shifts, z.dtype)[:, None]).reshape(((2 * p + 1) * F, p))
+        R, pred_all = self._residual(Z)
+        R = R.reshape((2 * p + 1, F) + R.shape[1:])
+        J = jnp.moveaxis((R[1: p + 1] - R[p + 1:]) / (2.0 * SECANT_STEP), 0, -1)  # (F, N, p)
+        pred = {k: v[:F] for k, v in pred_all.items()}
+        return R[0], J, pred
+
+    def __call__(self, z, jacobian: str = "secant"):
+        fn = self._value_and_secant if jacobian == "secant" else self._fn
+        r, J, pred = fn(jnp.asarray(z, jnp.float32))
         return np.asarray(r, np.float64), np.asarray(J, np.float64), pred
 
 
 def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, iters: int = 4,
-                 progress=None) -> dict:
+                 progress=None, jacobian: str = "secant") -> dict:
     """Levenberg-Marquardt from each fold's search point; see the module docstring."""
     from .fit import test_loss_parts
 
@@ -166,7 +183,9 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
     prob = _Problem(sim, cand, fold_defs, windows)
     u0 = np.clip(np.stack(units), U_EPS, 1 - U_EPS)
     z = np.log(u0) - np.log1p(-u0)
-    r, J, pred = prob(z)
+    if jacobian not in JACOBIANS:
+        raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
+    r, J, pred = prob(z, jacobian)
     n_calls = 1
     loss = np.sum(r**2, axis=1)
     lam = np.full(F, 1e-2)
@@ -198,7 +217,7 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
         if not active.any():
             break
         z_new = fold_z + step
-        r2, J2, pred2 = prob(z_new)
+        r2, J2, pred2 = prob(z_new, jacobian)
         n_calls += 1
         loss2 = np.sum(r2**2, axis=1)
         for f in np.flatnonzero(active):
@@ -242,4 +261,4 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
     if bad:
         notes.append(f"gradient not finite at the search point of {len(bad)} of {F} fits (those not polished)")
     return {"units": units_new, "preds": preds_new, "scores": scores_new, "improved": improved, "info": info,
-            "notes": notes, "n_simulations": n_calls * n_veh * (1 + p)}
+            "notes": notes, "n_simulations": n_calls * n_veh * ((1 + 2 * p) if jacobian == "secant" else (1 + p))}

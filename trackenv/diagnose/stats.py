@@ -14,13 +14,22 @@ adds (K · δ)² with δ² = 4 · 1.36 / K. z = (T − K)/√Var, one-sided p = 
 test × signal p-values are combined by Bonferroni (min p × number of cells): the gap is real if
 that is below α.
 
-**Does candidate A beat candidate B** (:func:`dm_test`): a Diebold-Mariano test of equal predictive
-accuracy. Per sample k of the held-out predictions, the loss differential d_k = ℓ_B,k − ℓ_A,k (the
-fit's per-sample loss term). Per test, the mean d̄_j and its variance by the Newey-West (Bartlett)
-estimator with a bandwidth of at least twice the integrated correlation time of d (so that the slow
-systematic differences, not only the noise, are counted as correlated); tests are independent, so
-D = Σ_j d̄_j (each test counts once, like the loss) has variance Σ_j v_j. z = D / √V, one-sided
-p = 1 − Φ(z).
+**Does candidate A beat candidate B** (:func:`paired_test`): a fixed-design test of equal
+predictive accuracy on the held-out samples, the likelihood-ratio idea for the AR(1) noise model of
+the gap test. With e = p − y − n (prediction p, noise-free truth y, noise n), the loss differential
+of one channel is e_B² − e_A² = δ · (p_A + p_B − 2y) − 2 δ n with δ = p_B − p_A. Conditional on the
+held-out inputs the first term is fixed and the second is *linear* in the noise, so the statistic
+D = Σ_tests Σ_signals c · Σ_k (e_B,k² − e_A,k²) (c: the loss's weight of a sample, :mod:`.fit`) has
+variance V = 4 Σ c² σ² δᵀRδ exactly, R the AR(1) correlation ρ^|k−l| of the channel's noise (σ, ρ
+from :func:`noise_ar1` of the base model's residual). z = D / √V, one-sided p = 1 − Φ(z). The only
+randomness counted is the instruments' noise, which is what "the gap shrinks beyond the noise on
+these held-out samples" means; the Gaussian approximation needs only many samples (D is linear in n).
+
+**Best of several candidates** (:func:`max_t_pvalue`): candidates are compared with the same
+reference on the same noise, so their z are jointly normal with correlations from the same
+quadratic form (δ_aᵀRδ_b). The p-value of the selected candidate's z is P(max_k Z_k ≥ z) under
+the least favourable null (all means zero), by Monte Carlo: a max-T correction that is exact for
+the family, not the Bonferroni bound.
 
 **Intervals** (:func:`block_bootstrap`): a moving-block bootstrap whose block length per test is the
 correlation time of the squared residuals (at least 0.2 s), tests resampled when there are three or
@@ -33,6 +42,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.signal import lfilter
 from scipy.stats import norm
 
 ALPHA = 0.05
@@ -97,41 +107,78 @@ def correlation_time(x: np.ndarray, max_lag: int | None = None) -> float:
     return float(tau)
 
 
-def hac_mean_var(d: np.ndarray) -> tuple[float, float, int]:
-    """(mean, variance of the mean, bandwidth) of ``d`` by Newey-West with a bandwidth ≥ 2 correlation times."""
-    d = _finite(d)
-    n = d.size
-    if n < 3:
-        return (float(d.mean()) if n else 0.0), float("inf"), 0
-    m = float(d.mean())
-    x = d - m
-    L = int(min(n // 2, max(math.ceil(4 * (n / 100) ** (2 / 9)), math.ceil(2 * correlation_time(d)))))
-    g0 = float(np.dot(x, x)) / n
-    s = g0
-    for lag in range(1, L + 1):
-        s += 2.0 * (1.0 - lag / (L + 1)) * float(np.dot(x[lag:], x[:-lag])) / n
-    return m, max(s, g0 / n) / n, L
+def ar1_form(x: np.ndarray, y: np.ndarray, rho: float) -> float:
+    """xᵀ R y with R_kl = ρ^|k−l| (the AR(1) correlation matrix), in O(K) by two first-order filters."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    if rho <= 0.0:
+        return float(x @ y)
+    fwd = lfilter([1.0], [1.0, -rho], y)
+    bwd = lfilter([1.0], [1.0, -rho], y[::-1])[::-1]
+    return float(x @ (fwd + bwd - y))
 
 
-def dm_test(loss_a: list, loss_b: list) -> dict:
-    """Diebold-Mariano: does A (per-test per-sample losses) have lower expected loss than B?
+def paired_terms(err_a: list, err_b: list, noise: list, weights: list) -> tuple[float, list]:
+    """D and the per-channel noise directions of "A beats B" (see the module docstring).
 
-    ``loss_a[j]``, ``loss_b[j]``: (K_j,) per-sample losses of test j (NaN: not compared).
-    Returns {"z", "p", "diff"} with diff = Σ_j mean(ℓ_B − ℓ_A) (> 0: A better), p one-sided.
+    ``err_a[j][sig]``, ``err_b[j][sig]``: (K,) signed errors sim − meas of test j (NaN: not compared);
+    ``noise[j][sig]`` = (σ, ρ); ``weights[j][sig]``: the loss's weight of a squared error of that channel.
+    Returns (D, terms) with terms a list of (σ, ρ, c·δ) per channel, δ = p_B − p_A on its compared samples.
     """
-    D, V = 0.0, 0.0
-    for a, b in zip(loss_a, loss_b):
-        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-        ok = np.isfinite(a) & np.isfinite(b)
-        if ok.sum() < 3:
-            continue
-        m, v, _ = hac_mean_var(b[ok] - a[ok])
-        D += m
-        V += v
-    if not (V > 0) or not np.isfinite(V):
+    D, terms = 0.0, []
+    for ea_j, eb_j, nz_j, w_j in zip(err_a, err_b, noise, weights):
+        chans = []
+        for sig, ea in ea_j.items():
+            ea, eb = np.asarray(ea, np.float64), np.asarray(eb_j[sig], np.float64)
+            ok = np.isfinite(ea) & np.isfinite(eb)
+            if ok.sum() >= 3:
+                chans.append((sig, ok))
+        for sig, ok in chans:
+            ea, eb = np.asarray(ea_j[sig], np.float64)[ok], np.asarray(eb_j[sig], np.float64)[ok]
+            c = w_j[sig] / (len(chans) * ok.sum())
+            D += c * float(np.sum(eb * eb - ea * ea))
+            sigma, rho = nz_j[sig]
+            terms.append((sig, sigma, rho, c * (eb - ea)))
+    return D, terms
+
+
+def paired_test(err_a: list, err_b: list, noise: list, weights: list) -> dict:
+    """Does A predict the held-out samples better than B beyond the noise? {"z", "p" (one-sided), "diff"}.
+
+    Arguments as :func:`paired_terms`. A channel whose noise level is not positive cannot be tested and
+    makes the comparison undecidable (p = 1).
+    """
+    D, terms = paired_terms(err_a, err_b, noise, weights)
+    V = 0.0
+    for _, sigma, rho, cd in terms:
+        if not (np.isfinite(sigma) and sigma > 0):
+            return {"z": 0.0, "p": 1.0, "diff": D}
+        V += 4.0 * sigma**2 * ar1_form(cd, cd, rho)
+    if not V > 0:
         return {"z": 0.0, "p": 1.0, "diff": D}
     z = D / math.sqrt(V)
     return {"z": float(z), "p": float(norm.sf(z)), "diff": float(D)}
+
+
+def paired_covariance(terms_a: list, terms_b: list) -> float:
+    """Noise covariance of two statistics D_A, D_B against the same reference (terms from :func:`paired_terms`)."""
+    cov = 0.0
+    for (sa, sigma, rho, ca), (sb, _, _, cb) in zip(terms_a, terms_b):
+        if sa != sb or ca.shape != cb.shape:
+            raise ValueError("paired_covariance: the two statistics are not on the same samples")
+        cov += 4.0 * sigma**2 * ar1_form(ca, cb, rho)
+    return cov
+
+
+def max_t_pvalue(z: float, corr: np.ndarray, n_draws: int = 200_000, seed: int = 0) -> float:
+    """P(max_k Z_k ≥ z) for Z ~ N(0, corr) (Monte Carlo with a fixed seed; 1 dimension: exact)."""
+    corr = np.atleast_2d(np.asarray(corr, np.float64))
+    if corr.shape[0] == 1:
+        return float(norm.sf(z))
+    w, v = np.linalg.eigh(corr)
+    L = v * np.sqrt(np.clip(w, 0.0, None))
+    draws = np.random.default_rng(seed).standard_normal((n_draws, corr.shape[0])) @ L.T
+    p = float(np.mean(draws.max(axis=1) >= z))
+    return max(p, float(norm.sf(z)))
 
 
 def block_length(x: np.ndarray, dt: float, min_s: float = 0.2) -> int:

@@ -52,7 +52,11 @@ class Effect(eqx.Module):
                 v = np.asarray(value, dtype=np.float64).reshape(-1)
             except (TypeError, ValueError):
                 raise ValueError(f"effect {self.id!r}: parameter {name!r} must be a number, got {value!r}") from None
-            bad = ~np.isfinite(v) | (v < lo) | (v > hi)
+            # compared in the leaf's own precision: float32(0.1) is not above a bound of 0.1
+            own = np.asarray(value).dtype
+            prec = own if np.issubdtype(own, np.floating) else np.float64
+            c = v.astype(prec)
+            bad = ~np.isfinite(v) | (c < np.asarray(lo, prec)) | (c > np.asarray(hi, prec))
             if bad.any():
                 x = float(v[np.flatnonzero(bad)[0]])
                 raise ValueError(f"effect {self.id!r}: parameter {name!r} = {x:.10g} out of bounds "
