@@ -16,7 +16,7 @@ Methods (each drives the same N episodes, same seeds, in one :class:`~trackenv.e
   ground the asphalt one) played as actions: each control step applies the profile's mean voltage
   over that step, then 0 V once the profile has ended. It is what the thesis's operator did (as far as
   it can be reconstructed), with no feedback.
-- ``classical``: :class:`ClassicalController`, PI on speed and yaw rate mapped to the mean and the
+- ``classical``: :class:`~trackenv.envs.controllers.ClassicalController`, PI on speed and yaw rate mapped to the mean and the
   right-left difference of the two voltages, with gains tuned per task x terrain by the procedure of
   :func:`tune_classical` (stored in ``configs/train/classical_gains.yaml``).
 
@@ -54,180 +54,15 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .params import ConfigError
-from .train import ENV_NAME, ROOT, load_policy, resolve_task, resolve_terrain
+from .envs.controllers import DEFAULT_GAINS, GAIN_GRID, GAINS_FILE, OpenLoop, classical_for, load_gains
+from .envs.tasks import task_class
+from .train import ENV_NAME, TASKS, load_policy, resolve_task, resolve_terrain
 
 METHODS = ("learned", "open_loop", "classical")
-GAINS_FILE = ROOT / "configs" / "train" / "classical_gains.yaml"
 METRICS = ("success", "tracking_rmse", "completion_time", "energy", "peak_current", "episode_return")
-RMSE_UNIT = {"go_stop": "m/s (speed)", "j_turn": "m (cross-track)", "lane_change": "m (cross-track)",
-             "zero_radius_turn": "rad/s (yaw rate)"}
 
 # ----------------------------------------------------------------------------------------------
-# classical controller
-
-# Feed-forward gains from the motor constants (trackenv.envs.baselines): 11.8 V hold 1.1 m/s
-# (r_s/alpha = 0.099 plus the R_m i drop), 5 V of right-left difference per rad/s of yaw rate while
-# driving, 4.8 V per rad/s spinning in place.
-FF_SPEED = 11.8 / 1.1  # V per m/s
-FF_YAW = 5.0  # V per rad/s (driving)
-FF_SPIN = 4.8  # V per rad/s (zero-radius turn)
-K_HEADING = 2.0  # rad/s of yaw-rate command per rad of heading error (outer loop)
-K_CROSS = 3.0  # rad/s per m of cross-track error (outer loop)
-I_LIMIT = 6.0  # V, anti-windup clamp of each integral term
-
-DEFAULT_GAINS = {"kp_speed": 4.0, "ki_speed": 4.0, "kp_yaw": 3.0, "ki_yaw": 3.0}
-GAIN_GRID = {"kp_speed": (2.0, 5.0, 10.0, 20.0), "ki_speed": (0.0, 5.0, 20.0),
-             "kp_yaw": (1.0, 3.0, 6.0), "ki_yaw": (0.0, 3.0, 10.0)}
-
-
-class ClassicalController:
-    """PI on forward speed and yaw rate, mapped to the mean and the right-left difference of the voltages.
-
-    Vectorised over N environments (rows of the observation); reads the observation by name only::
-
-        v_ref  = the task's reference speed: min(v*, sqrt(2 a_b d)) with d the distance to go
-                 (go-stop, J-turn; v*, a_b from the task's parameters) or v* (lane change)
-        mean   = FF_SPEED v_ref + kp_speed e_v + ki_speed int e_v dt
-        r_cmd  = r_ref - K_HEADING e_psi - K_CROSS e_y          (path tasks; go-stop: r_ref = 0)
-        diff   = FF r_cmd + kp_yaw (r_cmd - r) + ki_yaw int (r_cmd - r) dt
-        V_l, V_r = mean -+ diff / 2, clipped to +-24 V
-
-    In the zero-radius turn the mean is 0 and r_cmd = r_ref (= yaw_rate_error + r). The integrals are
-    clamped to +-I_LIMIT volts (anti-windup) and reset by :meth:`reset`. ``gains`` are scalars or (N,)
-    arrays (one gain set per environment, used by :func:`tune_classical`).
-    """
-
-    def __init__(self, task: str, obs_names, gains: dict | None = None, *, control_dt: float = 0.05,
-                 sprocket_radius: float = 0.0889, voltage_limit: float = 24.0, normalize_action: bool = True,
-                 target_speed: float = 1.1, brake_decel: float = 3.0):
-        self.task = resolve_task(task)
-        self.v_star = float(target_speed)
-        self.a_b = float(brake_decel)
-        self.idx = {n: i for i, n in enumerate(obs_names)}
-        g = {**DEFAULT_GAINS, **(gains or {})}
-        unknown = set(g) - set(DEFAULT_GAINS)
-        if unknown:
-            raise ConfigError(f"classical gains: unknown key(s) {sorted(unknown)}; known: {sorted(DEFAULT_GAINS)}")
-        self.g = {k: np.asarray(v, np.float64) for k, v in g.items()}
-        self.dt = float(control_dt)
-        self.r_s = float(sprocket_radius)
-        self.vmax = float(voltage_limit)
-        self.scale = 1.0 / self.vmax if normalize_action else 1.0
-        self.i_v = self.i_r = 0.0
-
-    def reset(self):
-        self.i_v = self.i_r = 0.0
-
-    def reset_rows(self, rows):
-        """Reset the integrators of the environments where ``rows`` (bool (N,)) is True."""
-        rows = np.asarray(rows, bool)
-        self.i_v = np.where(rows, 0.0, np.broadcast_to(self.i_v, rows.shape))
-        self.i_r = np.where(rows, 0.0, np.broadcast_to(self.i_r, rows.shape))
-
-    def reference_speed(self, obs):
-        """v_ref from the observation and the task's v*, a_b (the encoders would feed the track slip back)."""
-        if self.task == "go_stop":
-            return np.minimum(self.col(obs, "target_speed"),
-                              np.sqrt(2.0 * self.a_b * np.maximum(self.col(obs, "distance_to_mark"), 0.0)))
-        if self.task == "j_turn":
-            return np.minimum(self.v_star, np.sqrt(2.0 * self.a_b * np.maximum(self.col(obs, "distance_to_go"), 0.0)))
-        return np.full(obs.shape[0], self.v_star)
-
-    def col(self, obs, name):
-        return obs[:, self.idx[name]].astype(np.float64)
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        obs = np.atleast_2d(obs)
-        g = self.g
-        r = self.col(obs, "yaw_rate")
-        if self.task == "zero_radius_turn":
-            mean = np.zeros(obs.shape[0])
-            r_cmd = self.col(obs, "yaw_rate_error") + r
-            ff = FF_SPIN
-        else:
-            e_v = self.col(obs, "speed_error")
-            v_ref = self.reference_speed(obs)
-            self.i_v = np.clip(self.i_v + g["ki_speed"] * e_v * self.dt, -I_LIMIT, I_LIMIT)
-            mean = FF_SPEED * v_ref + g["kp_speed"] * e_v + self.i_v
-            r_ref = 0.0 if self.task == "go_stop" else self.col(obs, "yaw_rate_error") + r
-            r_cmd = r_ref - K_HEADING * self.col(obs, "heading_error") - K_CROSS * self.col(obs, "cross_track")
-            ff = FF_YAW
-        e_r = r_cmd - r
-        self.i_r = np.clip(self.i_r + g["ki_yaw"] * e_r * self.dt, -I_LIMIT, I_LIMIT)
-        diff = ff * r_cmd + g["kp_yaw"] * e_r + self.i_r
-        v = np.stack([mean - 0.5 * diff, mean + 0.5 * diff], axis=1)
-        return (np.clip(v, -self.vmax, self.vmax) * self.scale).astype(np.float32)
-
-
-def classical_for(params, gains: dict) -> ClassicalController:
-    """A :class:`ClassicalController` for an env's :class:`~trackenv.envs.core.EnvParams` (normalised actions)."""
-    t = params.task
-    v_star = float(np.asarray(t.target_speed).mean()) if hasattr(t, "target_speed") else 1.1
-    a_b = float(t.brake_decel) if hasattr(t, "brake_decel") and params.task.name != "zero_radius_turn" else 3.0
-    return ClassicalController(params.task.name, params.obs_names, gains, control_dt=params.control_dt,
-                               voltage_limit=params.voltage_limit, sprocket_radius=float(params.sim.vehicle.sprocket_radius),
-                               target_speed=v_star, brake_decel=a_b)
-
-
-def load_gains(task: str, terrain: str) -> dict:
-    """Tuned gains for ``task`` on ``terrain`` from ``configs/train/classical_gains.yaml``.
-
-    Terrains without an entry use dry sand's gains when deformable, asphalt's otherwise; the defaults
-    when the file has neither.
-    """
-    task = resolve_task(task)
-    if not GAINS_FILE.is_file():
-        return dict(DEFAULT_GAINS)
-    data = yaml.safe_load(GAINS_FILE.read_text(encoding="utf-8")) or {}
-    table = data.get("gains", {})
-    for t in (terrain, _profile_terrain(terrain)):
-        entry = table.get(f"{task}/{t}")
-        if entry:
-            return {k: float(entry[k]) for k in DEFAULT_GAINS}
-    return dict(DEFAULT_GAINS)
-
-
-# ----------------------------------------------------------------------------------------------
-# open loop
-
-
-def _profile_terrain(terrain: str) -> str:
-    """The terrain whose thesis profile a terrain uses: dry sand for deformable soils, else asphalt."""
-    if terrain in ("dry_sand", "asphalt"):
-        return terrain
-    from .params import load_params  # noqa: PLC0415
-
-    return "dry_sand" if float(load_params(terrain).terrain.deformable) > 0.5 else "asphalt"
-
-
-class OpenLoop:
-    """The reconstructed thesis profile ``configs/field/<task>_<terrain>.yaml`` as actions (see module doc)."""
-
-    def __init__(self, task: str, terrain: str, *, control_dt: float = 0.05, voltage_limit: float = 24.0,
-                 normalize_action: bool = True):
-        from .field_profiles import load_field_profile  # noqa: PLC0415
-
-        self.profile = load_field_profile(f"{resolve_task(task)}_{_profile_terrain(terrain)}")
-        self.dt = float(control_dt)
-        self.scale = 1.0 / voltage_limit if normalize_action else 1.0
-        self.k = 0
-
-    def reset(self):
-        self.k = 0
-
-    def volts(self, k: int) -> np.ndarray:
-        t0 = k * self.dt
-        if t0 >= self.profile.t_end:
-            return np.zeros(2)
-        ts = t0 + (np.arange(10) + 0.5) * self.dt / 10.0
-        return self.profile.voltages_at(ts).mean(axis=0)
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        n = np.atleast_2d(obs).shape[0]
-        v = self.volts(self.k)
-        self.k += 1
-        return np.broadcast_to((v * self.scale).astype(np.float32), (n, 2)).copy()
+# learned driver
 
 
 class Learned:
@@ -418,7 +253,7 @@ def evaluate(task: str, terrain: str = "dry_sand", policy: str | Path | Any | No
     seeds = [int(seed) + k for k in range(int(episodes))]
     result: dict[str, Any] = {"task": task, "env_id": f"trackenv/{ENV_NAME[task]}", "terrain": terrain,
                               "sim_terrain": sim_t, "randomize": bool(randomize) if isinstance(randomize, bool) else randomize,
-                              "seeds": seeds, "rmse_unit": RMSE_UNIT[task], "methods": {}}
+                              "seeds": seeds, "rmse_unit": task_class(task).primary_error.label, "methods": {}}
     all_eps = {}
     for m, drv in drivers.items():
         eps = run_episodes(venv, drv, seeds)
@@ -654,7 +489,7 @@ def tune_classical(task: str, terrain: str, *, seeds=(0,), grid: dict | None = N
 def tune_all(out: Path = GAINS_FILE, terrains=("dry_sand", "asphalt")) -> dict:
     """Tune every task x terrain and write ``configs/train/classical_gains.yaml``."""
     records = {}
-    for task in ENV_NAME:
+    for task in TASKS:
         for terrain in terrains:
             r = tune_classical(task, terrain)
             records[f"{task}/{terrain}"] = r
@@ -667,11 +502,11 @@ def tune_all(out: Path = GAINS_FILE, terrains=("dry_sand", "asphalt")) -> dict:
                       "terrain; cost = tracking RMSE, + 10x the worst RMSE if the episode fails; the cheapest set "
                       "wins. Feed-forward gains (11.8/1.1 V per m/s, 5 V and 4.8 V per rad/s) and the outer "
                       "path loop (2 rad/s per rad of heading error, 3 rad/s per m of cross-track) are fixed from "
-                      "the motor constants (trackenv.envs.baselines)."),
+                      "the thesis's voltage levels (trackenv.envs.controllers)."),
         "gains": {k: r["gains"] for k, r in records.items()},
         "tuning": {k: {kk: vv for kk, vv in r.items() if kk not in ("gains",)} for k, r in records.items()},
     }
-    out.write_text("# Tuned PI gains of the classical controller (trackenv.evaluate.ClassicalController).\n"
+    out.write_text("# Tuned PI gains of the classical controller (trackenv.envs.controllers.ClassicalController).\n"
                    "# Written by `python -m trackenv.evaluate --tune`; the procedure is stated below.\n"
                    + yaml.safe_dump(doc, sort_keys=False, width=110))
     return doc

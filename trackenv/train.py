@@ -24,7 +24,7 @@ env_kwargs          dict passed to :class:`~trackenv.envs.vector.TrackVectorEnv`
                     ``substep``, ``domain_randomization``, task options such as ``max_time``)
 checkpoint_freq     environment steps between checkpoints (default 100 000)
 residual            0 (default): the policy's action is the voltages; r > 0: a **residual** driver, the
-                    voltages are the classical PI controller's (trackenv.evaluate.ClassicalController,
+                    voltages are the classical PI controller's (trackenv.envs.controllers.ClassicalController,
                     gains of configs/train/classical_gains.yaml) plus r x the policy's action, all in
                     units of the 24 V limit (the gains and r are stored in the zip; see train/README.md)
 error_weight        w >= 0 (default 0): training reward shaping, r - w (e / s)^2 with e the task's
@@ -71,23 +71,20 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .envs.tasks import ENV_NAMES, task_class
+from .envs.tasks import TASKS as _TASK_CLASSES
 from .params import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "train"
 DRIVERS_DIR = ROOT / "train" / "drivers"
 
-TASKS = ("go_stop", "j_turn", "lane_change", "zero_radius_turn")
-ENV_NAME = {"go_stop": "GoStop-v0", "j_turn": "JTurn-v0", "lane_change": "LaneChange-v0",
-            "zero_radius_turn": "ZeroRadiusTurn-v0"}
+TASKS = tuple(_TASK_CLASSES)  # task ids, from the task registry (trackenv.envs.tasks)
+ENV_NAME = ENV_NAMES  # task id -> env name
 TERRAINS = ("dry_sand", "asphalt")  # the shipped drivers' terrains; any configs/terrain id trains
 ALGOS = ("ppo", "sac")
 META_KEYS = ("n_envs", "n_timesteps", "policy", "policy_kwargs", "env_kwargs", "checkpoint_freq", "residual",
              "error_weight")
-# The task's primary tracking error (its TaskEval.error, the tracking-RMSE metric) in the observation, and
-# the scale of its tracking kernel: error_weight w adds -w (e / scale)^2 to the training reward.
-PRIMARY_ERROR = {"go_stop": ("speed_error", 0.2), "j_turn": ("cross_track", 0.15),
-                 "lane_change": ("cross_track", 0.15), "zero_radius_turn": ("yaw_rate_error", 0.5)}
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 PICKLE_WARNING = ("SB3 policy zips are pickles and can run arbitrary code when loaded: load only policies "
                   "from trusted sources")
@@ -107,13 +104,7 @@ class PickleWarning(UserWarning):
 
 def resolve_task(task: str) -> str:
     """Task id from a task id (``j_turn``), an env name (``JTurn-v0``) or an env id (``trackenv/JTurn-v0``)."""
-    name = str(task).split("/")[-1]
-    if name in TASKS:
-        return name
-    for t, n in ENV_NAME.items():
-        if name == n:
-            return t
-    raise ConfigError(f"unknown task {task!r}; known: {', '.join(TASKS)} or {', '.join(ENV_NAME.values())}")
+    return task_class(task).name
 
 
 def resolve_terrain(terrain: str) -> str:
@@ -294,8 +285,9 @@ def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None =
     inner = ResidualVecEnv(timer, residual["scale"], residual["gains"]) if residual else timer
     mon = VecMonitor(inner, info_keywords=("is_success", "tracking_rmse"))
     if error_weight > 0:
-        name, scale = PRIMARY_ERROR[resolve_task(task)]
-        mon = ErrorPenalty(mon, venv.venv.obs_names.index(name), scale, error_weight)
+        # the task's primary tracking error (its TaskEval.error, the RMSE metric) and its kernel scale
+        pe = task_class(task).primary_error
+        mon = ErrorPenalty(mon, venv.venv.obs_names.index(pe.obs_name), pe.scale, error_weight)
     if seed is not None:
         mon.seed(int(seed))
     return mon, timer
@@ -336,13 +328,13 @@ class StepTimer(_VecEnvWrapper):
 class ResidualVecEnv(_VecEnvWrapper):
     """Residual driver: applied action = clip(classical(obs) + scale * policy action, -1, 1) (units of 24 V).
 
-    The classical PI controller (:class:`trackenv.evaluate.ClassicalController`) runs on the same
+    The classical PI controller (:class:`trackenv.envs.controllers.ClassicalController`) runs on the same
     observations, one integrator per environment, reset when an episode ends.
     """
 
     def __init__(self, venv, scale: float, gains: dict):
         super().__init__(venv)
-        from .evaluate import classical_for  # noqa: PLC0415
+        from .envs.controllers import classical_for  # noqa: PLC0415
 
         base = venv
         while not hasattr(base, "venv") or not hasattr(base.venv, "params"):
@@ -485,7 +477,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     run.mkdir(parents=True, exist_ok=True)
     driver_meta = {"task": task, "terrain": terrain, "residual": cfg["residual"]}
     if cfg["residual"] > 0:
-        from .evaluate import load_gains  # noqa: PLC0415
+        from .envs.controllers import load_gains  # noqa: PLC0415
 
         driver_meta["gains"] = load_gains(task, terrain)
     residual = {"scale": cfg["residual"], "gains": driver_meta["gains"]} if cfg["residual"] > 0 else None
