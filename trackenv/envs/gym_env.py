@@ -264,8 +264,9 @@ def check_keywords(task: str, task_kwargs: dict) -> None:
 
     if task not in TASKS:
         return  # make_params reports the unknown task
-    accepted = sorted(set(ENV_KEYWORDS) | set(TASKS[task].DEFAULTS))
-    unknown = sorted(set(task_kwargs) - set(TASKS[task].DEFAULTS))
+    options = TASKS[task].default_params()
+    accepted = sorted(set(ENV_KEYWORDS) | set(options))
+    unknown = sorted(set(task_kwargs) - set(options))
     if unknown:
         close = difflib.get_close_matches(unknown[0], accepted, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""

@@ -60,6 +60,12 @@ class PrimaryError(NamedTuple):
         return f"{self.unit} ({self.quantity})"
 
 
+# The tracking kernels of the path-following tasks (J-turn, lane change): m/s, m, rad, rad/s; their primary
+# error is the cross-track error.
+PATH_KERNEL_SCALES = {"speed_error": 0.2, "cross_track": 0.15, "heading_error": 0.25, "yaw_rate_error": 0.5}
+PATH_PRIMARY_ERROR = PrimaryError("cross_track", "m", "cross-track", PATH_KERNEL_SCALES["cross_track"])
+
+
 class RewardParams(eqx.Module):
     """Reward terms shared by all tasks (see each task's docstring for its tracking terms).
 

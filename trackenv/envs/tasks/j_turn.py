@@ -11,7 +11,8 @@ import numpy as np
 
 from .. import paths
 from .base import (
-    PrimaryError,
+    PATH_KERNEL_SCALES,
+    PATH_PRIMARY_ERROR,
     RewardParams,
     Task,
     TaskEval,
@@ -85,8 +86,8 @@ class JTurn(Task):
     name = "j_turn"
     env_name = "JTurn-v0"
     field_profile = "j_turn"
-    kernel_scales = {"speed_error": 0.2, "cross_track": 0.15, "heading_error": 0.25, "yaw_rate_error": 0.5}
-    primary_error = PrimaryError("cross_track", "m", "cross-track", kernel_scales["cross_track"])
+    kernel_scales = PATH_KERNEL_SCALES
+    primary_error = PATH_PRIMARY_ERROR
     steering = "path"
     obs_names, obs_low, obs_high = obs_bounds(_OBS)
 

@@ -13,7 +13,8 @@ from .. import paths
 from .base import (
     FOOTPRINT_LENGTH,
     FOOTPRINT_WIDTH,
-    PrimaryError,
+    PATH_KERNEL_SCALES,
+    PATH_PRIMARY_ERROR,
     RewardParams,
     Task,
     TaskEval,
@@ -89,8 +90,8 @@ class LaneChange(Task):
     name = "lane_change"
     env_name = "LaneChange-v0"
     field_profile = "lane_change"
-    kernel_scales = {"speed_error": 0.2, "cross_track": 0.15, "heading_error": 0.25, "yaw_rate_error": 0.5}
-    primary_error = PrimaryError("cross_track", "m", "cross-track", kernel_scales["cross_track"])
+    kernel_scales = PATH_KERNEL_SCALES
+    primary_error = PATH_PRIMARY_ERROR
     steering = "path"
     obs_names, obs_low, obs_high = obs_bounds(_OBS)
 
