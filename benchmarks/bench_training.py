@@ -4,7 +4,7 @@
 
 Trains with the shipped config (configs/train/ppo.yaml: 256 native environments, 8192 transitions per
 update, 10 epochs of 2048-sample minibatches on a [64, 64] MLP, torch on 1 thread) and times
-``step_wait``/``reset`` of the SB3 adapter (trackenv.train.StepTimer) against the wall time of
+``step_wait``/``reset`` of the SB3 adapter (trackenv.drivers.wrappers.StepTimer) against the wall time of
 ``model.learn``. Also reports the share for smaller batches of environments. Every shipped driver's
 record (train/drivers/*.json) holds the same measurement over its whole training run.
 """
@@ -21,7 +21,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 torch.set_num_threads(1)
 
-from trackenv.train import load_config, train  # noqa: E402
+from trackenv.drivers import load_config, train  # noqa: E402
 
 
 def main():

@@ -14,18 +14,12 @@ from __future__ import annotations
 import numpy as np
 
 import trackenv as te
+from trackenv.check_maneuvers import check_maneuvers
 from trackenv.physics.model import initial_state
 from trackenv.simulate import MAX_SUBSTEP, _simulate_jit, n_substeps
 
 MANEUVERS = {
-    "go_stop_sand": ("dry_sand", [[0, 0, 0], [0.3, 11.8, 11.8], [3.0, 11.8, 11.8], [3.1, 0, 0]], 4.5),
-    "j_turn_asphalt": ("asphalt", [[0, 0, 0], [0.3, 11.8, 11.8], [1.5, 11.8, 11.8], [1.7, 16, 6], [2.6, 16, 6],
-                                   [2.7, 0, 0]], 4.0),
-    "lane_change_sand": ("dry_sand", [[0, 0, 0], [0.3, 11.8, 11.8], [1.0, 11.8, 11.8], [1.1, 9, 14.6],
-                                      [1.6, 9, 14.6], [1.7, 14.6, 9], [2.2, 14.6, 9], [2.3, 11.8, 11.8],
-                                      [2.8, 11.8, 11.8], [2.9, 0, 0]], 4.0),
-    "zrt_asphalt": ("asphalt", [[0, 0, 0], [0.3, 12, -12], [2.0, 12, -12], [2.1, 0, 0]], 2.3),
-    "zrt_sand": ("dry_sand", [[0, 0, 0], [0.3, 12, -12], [2.0, 12, -12], [2.1, 0, 0]], 2.3),
+    **check_maneuvers(),
     "reversal_24V_asphalt": ("asphalt", [[0, 0, 0], [0.1, 24, 24], [1.0, 24, 24], [1.1, -24, -24], [2.0, -24, -24],
                                          [2.1, 24, -24], [3, 24, -24]], 3.0),
 }

@@ -22,28 +22,18 @@ import pytest
 
 import trackenv as te
 from trackenv import instruments
+from trackenv.check_maneuvers import check_maneuvers, is_spin
 from trackenv.reference import reference_solution
 from trackenv.simulate import DEFAULT_SUBSTEP
 
 pytestmark = pytest.mark.slow
 
 CHANNELS = ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "y", "heading")
-MANEUVERS = {
-    # id: (terrain, breakpoints [t, vL, vR], t_end)
-    "go_stop_sand": ("dry_sand", [[0, 0, 0], [0.3, 11.8, 11.8], [3.0, 11.8, 11.8], [3.1, 0, 0]], 4.5),
-    "j_turn_asphalt": ("asphalt", [[0, 0, 0], [0.3, 11.8, 11.8], [1.5, 11.8, 11.8], [1.7, 16, 6], [2.6, 16, 6],
-                                   [2.7, 0, 0]], 4.0),
-    "lane_change_sand": ("dry_sand", [[0, 0, 0], [0.3, 11.8, 11.8], [1.0, 11.8, 11.8], [1.1, 9, 14.6],
-                                      [1.6, 9, 14.6], [1.7, 14.6, 9], [2.2, 14.6, 9], [2.3, 11.8, 11.8],
-                                      [2.8, 11.8, 11.8], [2.9, 0, 0]], 4.0),
-}
-# The zero-radius turn keeps z-bar at mid-track, where the lateral decay rate (3.31) is ~1e6 1/s and
-# switches element by element as z-bar jitters: the adaptive reference needs > 10 min there, so
-# the spin is checked by self-convergence against a 4x finer substep instead.
-SPINS = {
-    "zero_radius_turn_asphalt": ("asphalt", [[0, 0, 0], [0.3, 12, -12], [2.0, 12, -12], [2.1, 0, 0]], 2.3),
-    "zero_radius_turn_sand": ("dry_sand", [[0, 0, 0], [0.3, 12, -12], [2.0, 12, -12], [2.1, 0, 0]], 2.3),
-}
+# The maneuvers of trackenv.check_maneuvers; the zero-radius turn keeps z-bar at mid-track, where the
+# lateral decay rate (3.31) is ~1e6 1/s and switches element by element as z-bar jitters: the adaptive
+# reference needs > 10 min there, so the spins are checked by self-convergence against a 4x finer substep.
+MANEUVERS = {k: m for k, m in check_maneuvers().items() if not is_spin(m)}
+SPINS = {k: m for k, m in check_maneuvers().items() if is_spin(m)}
 
 
 @functools.cache

@@ -15,9 +15,9 @@ from trackenv.params import ConfigError
 
 pytest.importorskip("stable_baselines3")
 
-from trackenv import evaluate as ev  # noqa: E402
-from trackenv import train as tr  # noqa: E402
+from trackenv import drivers  # noqa: E402
 from trackenv.cli import main  # noqa: E402
+from trackenv.envs import controllers  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -27,10 +27,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_shipped_configs_validate():
-    for algo in tr.ALGOS:
-        for task in tr.TASKS:
+    for algo in drivers.ALGOS:
+        for task in drivers.TASKS:
             for terrain in ("dry_sand", "asphalt"):
-                cfg = tr.load_config(algo, task, terrain)
+                cfg = drivers.load_config(algo, task, terrain)
                 assert cfg["n_timesteps"] > 0 and cfg["policy"] == "MlpPolicy"
 
 
@@ -38,32 +38,32 @@ def test_unknown_config_key_names_file_and_key(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump({"default": {"n_timesteps": 1000, "learning_rat": 1e-3}}))
     with pytest.raises(ConfigError, match=r"bad\.yaml.*learning_rat"):
-        tr.load_config("ppo", "go_stop", "dry_sand", bad)
+        drivers.load_config("ppo", "go_stop", "dry_sand", bad)
     bad.write_text(yaml.safe_dump({"GoStopp-v0": {"n_timesteps": 1000}}))
     with pytest.raises(ConfigError, match=r"bad\.yaml.*GoStopp-v0"):
-        tr.load_config("ppo", "go_stop", "dry_sand", bad)
+        drivers.load_config("ppo", "go_stop", "dry_sand", bad)
     bad.write_text(yaml.safe_dump({"default": {"n_timesteps": -5}}))
     with pytest.raises(ConfigError, match="n_timesteps"):
-        tr.load_config("ppo", "go_stop", "dry_sand", bad)
+        drivers.load_config("ppo", "go_stop", "dry_sand", bad)
     # SAC-only key in a PPO config
     bad.write_text(yaml.safe_dump({"default": {"n_timesteps": 1000, "buffer_size": 10}}))
     with pytest.raises(ConfigError, match="buffer_size"):
-        tr.load_config("ppo", "go_stop", "dry_sand", bad)
+        drivers.load_config("ppo", "go_stop", "dry_sand", bad)
 
 
 def test_unknown_task_terrain_algo_fail_before_training(tmp_path, capsys):
     with pytest.raises(ConfigError, match="unknown task"):
-        tr.train("go_stopp", "dry_sand", "ppo", out_dir=tmp_path)
+        drivers.train("go_stopp", "dry_sand", "ppo", out_dir=tmp_path)
     with pytest.raises(ConfigError, match="unknown terrain"):
-        tr.train("go_stop", "mud", "ppo", out_dir=tmp_path)
+        drivers.train("go_stop", "mud", "ppo", out_dir=tmp_path)
     with pytest.raises(ConfigError, match="unknown algorithm"):
-        tr.train("go_stop", "dry_sand", "dqn", out_dir=tmp_path)
+        drivers.train("go_stop", "dry_sand", "dqn", out_dir=tmp_path)
     assert not any(tmp_path.iterdir())  # nothing was built or written
     assert main(["train", "NoSuchTask-v0", "--terrain", "dry_sand", "--out", str(tmp_path)]) == 2
     assert "unknown task" in capsys.readouterr().err
     assert main(["evaluate", "none", "--task", "go_stop", "--terrain", "moon"]) == 2
     assert "unknown terrain" in capsys.readouterr().err
-    assert tr.resolve_task("JTurn-v0") == "j_turn" and tr.resolve_task("trackenv/GoStop-v0") == "go_stop"
+    assert drivers.resolve_task("JTurn-v0") == "j_turn" and drivers.resolve_task("trackenv/GoStop-v0") == "go_stop"
 
 
 # ----------------------------------------------------------------------------------------------
@@ -74,10 +74,10 @@ def test_unknown_task_terrain_algo_fail_before_training(tmp_path, capsys):
 def tiny_policy(tmp_path_factory):
     """A tiny (untrained) PPO zip for GoStop-v0."""
     d = tmp_path_factory.mktemp("pol")
-    res = tr.train("go_stop", "dry_sand", "ppo", timesteps=64, out_dir=d, progress_bar=False, tensorboard=False,
-                   config={"default": {"n_envs": 4, "n_timesteps": 64, "n_steps": 16, "batch_size": 32, "n_epochs": 1,
-                                       "policy_kwargs": {"net_arch": [8]}, "checkpoint_freq": 32,
-                                       "env_kwargs": {"max_time": 0.5}}})
+    res = drivers.train("go_stop", "dry_sand", "ppo", timesteps=64, out_dir=d, progress_bar=False, tensorboard=False,
+                        config={"default": {"n_envs": 4, "n_timesteps": 64, "n_steps": 16, "batch_size": 32, "n_epochs": 1,
+                                            "policy_kwargs": {"net_arch": [8]}, "checkpoint_freq": 32,
+                                            "env_kwargs": {"max_time": 0.5}}})
     return res
 
 
@@ -87,24 +87,24 @@ def test_train_writes_zip_record_and_checkpoints_and_resumes(tiny_policy):
     info = json.loads(res.info_path.read_text())
     assert info["n_timesteps"] >= 64 and info["train_seconds"] > 0 and 0 < info["env_step_share"] <= 1
     assert info["seed"] == 0 and info["config"]["n_envs"] == 4
-    assert tr.latest_checkpoint(res.model_path.parent) is not None
+    assert drivers.latest_checkpoint(res.model_path.parent) is not None
     cfg = dict(info["config"])
-    r2 = tr.train("go_stop", "dry_sand", "ppo", config={"default": cfg}, timesteps=128, out_dir=res.model_path.parent,
-                  resume=True, progress_bar=False, tensorboard=False)
+    r2 = drivers.train("go_stop", "dry_sand", "ppo", config={"default": cfg}, timesteps=128, out_dir=res.model_path.parent,
+                       resume=True, progress_bar=False, tensorboard=False)
     assert r2.info["resumed_from"] and r2.info["n_timesteps"] >= 128
 
 
 def test_load_warns_pickle_and_checks_spaces(tiny_policy, capsys):
-    with pytest.warns(tr.PickleWarning, match="trusted sources"):
-        model = tr.load_policy(tiny_policy.model_path, "go_stop", "dry_sand")
+    with pytest.warns(drivers.PickleWarning, match="trusted sources"):
+        model = drivers.load_policy(tiny_policy.model_path, "go_stop", "dry_sand")
     assert "trusted sources" in capsys.readouterr().err
-    assert model.observation_space.shape[0] == len(tr.expected_spaces("go_stop")[0].low)
+    assert model.observation_space.shape[0] == len(drivers.expected_spaces("go_stop")[0].low)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        with pytest.raises(tr.PolicySpaceError, match="observation space"):
-            tr.load_policy(tiny_policy.model_path, "zero_radius_turn", "dry_sand")  # other task, other obs
-        with pytest.raises(tr.PolicySpaceError):
-            ev.evaluate("j_turn", "dry_sand", tiny_policy.model_path, episodes=1, methods=("learned",))
+        with pytest.raises(drivers.PolicySpaceError, match="observation space"):
+            drivers.load_policy(tiny_policy.model_path, "zero_radius_turn", "dry_sand")  # other task, other obs
+        with pytest.raises(drivers.PolicySpaceError):
+            drivers.evaluate("j_turn", "dry_sand", tiny_policy.model_path, episodes=1, methods=("learned",))
     assert main(["evaluate", str(tiny_policy.model_path), "--task", "lane_change", "--terrain", "dry_sand"]) == 2
     assert "does not match" in capsys.readouterr().err
 
@@ -116,8 +116,8 @@ def test_load_warns_pickle_and_checks_spaces(tiny_policy, capsys):
 def test_open_loop_energy_is_integral_of_v_i_and_logs_are_field_logs(tmp_path):
     from trackenv.fieldlog import read_field_log
 
-    res = ev.evaluate("go_stop", "dry_sand", None, episodes=1, methods=("open_loop", "classical"),
-                      log_dir=tmp_path / "logs", figures=tmp_path / "fig")
+    res = drivers.evaluate("go_stop", "dry_sand", None, episodes=1, methods=("open_loop", "classical"),
+                           log_dir=tmp_path / "logs", figures=tmp_path / "fig")
     ol = res["methods"]["open_loop"]
     ep = ol["episodes"][0]
     log = read_field_log(tmp_path / "logs" / "open_loop_seed1000")
@@ -134,7 +134,7 @@ def test_open_loop_energy_is_integral_of_v_i_and_logs_are_field_logs(tmp_path):
     # classical PI (tuned gains) succeeds on the go-stop
     assert res["methods"]["classical"]["summary"]["success_rate"] == 1.0
     assert len(res["figures"]) == 3 and all(Path(f).is_file() for f in res["figures"])
-    table = ev.format_table(res)
+    table = drivers.format_table(res)
     assert "open_loop" in table and "classical" in table
 
 
@@ -148,8 +148,8 @@ SMOKE_CFG = {"default": {"n_envs": 16, "n_timesteps": 12288, "n_steps": 32, "bat
 
 
 def smoke_returns(driver, seeds, env_kwargs=SMOKE_ENV):
-    venv = ev.make_eval_env("go_stop", "dry_sand", len(seeds), randomize=True, env_kwargs=env_kwargs)
-    eps = ev.run_episodes(venv, driver, seeds)
+    venv = drivers.make_eval_env("go_stop", "dry_sand", len(seeds), randomize=True, env_kwargs=env_kwargs)
+    eps = drivers.run_episodes(venv, driver, seeds)
     venv.close()
     return np.array([e["episode_return"] for e in eps])
 
@@ -158,12 +158,12 @@ def test_ppo_learns_go_stop_better_than_random(tmp_path):
     seeds = list(range(100, 116))
     rng = np.random.default_rng(0)
     random_returns = smoke_returns(lambda obs: rng.uniform(-1, 1, (len(obs), 2)).astype(np.float32), seeds)
-    res = tr.train("go_stop", "dry_sand", "ppo", config=SMOKE_CFG, seed=0, out_dir=tmp_path, progress_bar=False,
-                   tensorboard=False)
+    res = drivers.train("go_stop", "dry_sand", "ppo", config=SMOKE_CFG, seed=0, out_dir=tmp_path, progress_bar=False,
+                        tensorboard=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = tr.load_policy(res.model_path, "go_stop", "dry_sand", warn=False)
-    learned = smoke_returns(ev.Learned(model), seeds)
+        model = drivers.load_policy(res.model_path, "go_stop", "dry_sand", warn=False)
+    learned = smoke_returns(drivers.Learned(model), seeds)
     # significantly better: Welch's t statistic of the gain > 5 (p << 1e-4), and a sizeable gain
     gain = learned.mean() - random_returns.mean()
     se = np.sqrt(learned.var(ddof=1) / len(seeds) + random_returns.var(ddof=1) / len(seeds))
@@ -173,30 +173,38 @@ def test_ppo_learns_go_stop_better_than_random(tmp_path):
 def test_sac_trains_saves_and_loads(tmp_path):
     cfg = {"default": {"n_envs": 4, "n_timesteps": 64, "learning_starts": 16, "batch_size": 16, "buffer_size": 1000,
                        "policy_kwargs": {"net_arch": [8]}, "env_kwargs": {"max_time": 0.5}}}
-    res = tr.train("zero_radius_turn", "asphalt", "sac", config=cfg, out_dir=tmp_path, progress_bar=True,
-                   tensorboard=False)
+    res = drivers.train("zero_radius_turn", "asphalt", "sac", config=cfg, out_dir=tmp_path, progress_bar=True,
+                        tensorboard=False)
     assert res.info["algo"] == "sac" and res.model_path.name == "ZeroRadiusTurn-v0-asphalt.zip"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = tr.load_policy(res.model_path, "ZeroRadiusTurn-v0", "asphalt")
+        model = drivers.load_policy(res.model_path, "ZeroRadiusTurn-v0", "asphalt")
     assert type(model).__name__ == "SAC"
 
 
 def test_residual_driver_with_zero_policy_is_the_classical_controller():
     """The residual wrapper applies classical(obs) + r * action: a zero action reproduces the PI episode."""
-    gains = ev.load_gains("go_stop", "dry_sand")
-    venv, _ = tr.make_vec_env("go_stop", "dry_sand", 2, {}, seed=1000, residual={"scale": 0.3, "gains": gains})
+    gains = controllers.load_gains("go_stop", "dry_sand")
+    venv, _ = drivers.make_vec_env("go_stop", "dry_sand", 2, {}, seed=1000, residual={"scale": 0.3, "gains": gains})
     obs = venv.reset()
     rewards = []
     for _ in range(30):
         obs, r, done, _ = venv.step(np.zeros((2, 2), np.float32))
         rewards.append(r[0])
     venv.close()
-    env = ev.make_eval_env("go_stop", "dry_sand", 1)
-    eps = ev.run_episodes(env, ev.classical_for(env.params, gains), [1000])
+    env = drivers.make_eval_env("go_stop", "dry_sand", 1)
+    eps = drivers.run_episodes(env, controllers.classical_for(env.params, gains), [1000])
     assert eps[0]["success"]
     # same returns over the first 30 steps (nominal terrain: the seed does not matter)
     partial = float(np.sum(rewards))
-    env2 = ev.make_eval_env("go_stop", "dry_sand", 1, env_kwargs={"max_time": 1.5})
-    eps2 = ev.run_episodes(env2, ev.classical_for(env2.params, gains), [1000])
+    env2 = drivers.make_eval_env("go_stop", "dry_sand", 1, env_kwargs={"max_time": 1.5})
+    eps2 = drivers.run_episodes(env2, controllers.classical_for(env2.params, gains), [1000])
     assert partial == pytest.approx(eps2[0]["episode_return"], rel=1e-4, abs=1e-3)
+
+
+def test_records_name_repository_files_relative_to_the_repository(tmp_path):
+    from trackenv.drivers.config import CONFIG_DIR, repo_relative
+
+    assert repo_relative(CONFIG_DIR / "ppo.yaml") == "configs/train/ppo.yaml"
+    assert repo_relative(tmp_path / "x.zip") == str(tmp_path / "x.zip")  # outside the repository: as given
+    assert repo_relative(None) is None

@@ -19,57 +19,18 @@ import sys
 import time
 from pathlib import Path
 
-RECONSTRUCTED = ("voltages RECONSTRUCTED from the thesis text (configs/field), not measured; "
-                 "simulated with the base model")
-
-
-def _simulate_test(test_id: str, terrain: str | None, internal: str | None, substep: float):
-    import numpy as np
-
-    import trackenv as te
-    from trackenv.field_profiles import load_field_profile
-
-    prof = load_field_profile(test_id)
-    params = te.load_params(terrain or prof.terrain, internal_resistance=internal or prof.internal_resistance)
-    vp = te.VoltageProfile.from_arrays(prof.t, prof.volts, source=f"configs/field/{test_id}.yaml")
-    t_end = float(np.ceil(prof.t_end / 0.05 - 1e-9) * 0.05)
-    traj = te.simulate(params, vp, t_end, substep=substep)
-    return prof, params, traj
-
-
-def _summary(prof, traj) -> dict:
-    import numpy as np
-
-    from trackenv.replay import anchor_metrics
-
-    ch = {k: np.asarray(v) for k, v in traj.channels.items()}
-    out = {
-        "test": prof.id, "terrain": prof.terrain, "maneuver": prof.maneuver,
-        "peak_speed_ideal_m_s": float(np.max(np.abs(ch["speed_ideal"]))),
-        "peak_yaw_rate_rad_s": float(np.max(np.abs(ch["yaw_rate"]))),
-        "peak_current_A": float(np.max(np.abs([ch["i_left"], ch["i_right"]]))),
-        "final_position_m": [float(ch["x"][-1]), float(ch["y"][-1])],
-        "final_heading_deg": float(np.degrees(ch["heading"][-1])),
-        "anchors": [],
-    }
-    for a in anchor_metrics(prof, traj, 0.05):
-        if a["simulated"] is not None:
-            out["anchors"].append({"signal": a["signal"], "window_s": [a["t0"], a["t1"]],
-                                   "thesis_field": a["thesis_field"], "simulated": a["simulated"],
-                                   "rel_diff": a["rel_diff"]})
-    return out
-
 
 def cmd_simulate(args) -> int:
     import numpy as np
 
     import trackenv as te
+    from trackenv.demo import RECONSTRUCTED, simulate_test
     from trackenv.outputs import prepare_output_dir
     from trackenv.plots import maneuver_figure
 
     out = prepare_output_dir(args.out, "simulate", force=args.force)
     if args.test:
-        prof, params, traj = _simulate_test(args.test, args.terrain, args.internal_resistance, args.substep)
+        prof, params, traj = simulate_test(args.test, args.terrain, args.internal_resistance, args.substep)
         title, caption = f"{prof.id} ({prof.terrain})", RECONSTRUCTED
     else:
         if not args.voltages:
@@ -92,98 +53,11 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from tqdm import tqdm
+    """``trackenv demo``: every thesis test, the field twin replayed, the gaps diagnosed (trackenv/demo.py)."""
+    from trackenv.demo import run_demo
 
-    from trackenv.field_profiles import list_field_tests
-    from trackenv.outputs import prepare_output_dir
-    from trackenv.plots import maneuver_figure
-
-    out = prepare_output_dir(args.out, "demo", force=args.force)
-    rows = []
-    t0 = time.perf_counter()
-    for test in tqdm(list_field_tests(), desc="simulating thesis tests", unit="test"):
-        prof, params, traj = _simulate_test(test, None, None, args.substep)
-        maneuver_figure(traj, f"{prof.id} ({prof.terrain})", out / f"{test}.png", caption=RECONSTRUCTED)
-        rows.append(_summary(prof, traj))
-    (out / "summary.json").write_text(json.dumps({"note": RECONSTRUCTED, "tests": rows}, indent=2))
-    lines = ["# trackenv demo: the thesis's field tests on the base model", "",
-             f"*{RECONSTRUCTED}.* Wall time {time.perf_counter() - t0:.1f} s.", "",
-             "| test | peak speed m/s | peak yaw rate rad/s | peak current A | anchor: thesis field vs simulated |",
-             "|---|---|---|---|---|"]
-    for r in rows:
-        anchors = "; ".join(f"{a['signal']} {a['window_s'][0]:g}-{a['window_s'][1]:g} s: {a['thesis_field']:g} vs "
-                            f"{a['simulated']:.3f} ({a['rel_diff']:+.1%})" for a in r["anchors"]) or "-"
-        lines.append(f"| [{r['test']}]({r['test']}.png) | {r['peak_speed_ideal_m_s']:.3f} | "
-                     f"{r['peak_yaw_rate_rad_s']:.3f} | {r['peak_current_A']:.2f} | {anchors} |")
-    lines += _demo_twin_replays(out, args.substep)
-    if not getattr(args, "no_diagnose", False):
-        lines = _demo_diagnoses(out) + [""] + lines
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    print(f"\nwrote {out / 'report.md'}, {out / 'summary.json'} and the figures")
+    run_demo(args.out, args.substep, diagnose=not getattr(args, "no_diagnose", False), force=args.force)
     return 0
-
-
-SAND_TESTS = ["go_stop_dry_sand", "go_stop_2ms_dry_sand", "j_turn_dry_sand", "lane_change_dry_sand",
-              "zero_radius_turn_dry_sand"]
-
-
-def _demo_diagnoses(out: Path) -> list[str]:
-    """The demo's main job: diagnose the thesis's own gaps on the SYNTHETIC field twin."""
-    from trackenv.diagnose import diagnose
-
-    twin = Path(__file__).resolve().parent.parent / "data" / "field" / "thesis"
-    runs = [
-        ("sand", "the sand tests, constant internal resistance (Table 5.4)", SAND_TESTS, "constant",
-         "thesis §5.3.4: the base model turns ~11x too fast in the ZRT on sand"),
-        ("viscous_go_stop", "the two sand go-stops, viscous internal resistance (Table 5.3) as base",
-         ["go_stop_dry_sand", "go_stop_2ms_dry_sand"], "viscous",
-         "thesis §5.4.1: the viscous model predicts ~3.1 A at 2 m/s where the field drew 2.23 A"),
-    ]
-    lines = ["# trackenv demo: the thesis's gaps diagnosed", "",
-             "*On the SYNTHETIC field twin (`data/field/thesis`: reconstructed voltages simulated with withheld "
-             "unmodelled effects and instrument noise; not measured data). `trackenv diagnose` replays each test "
-             "on the base model, places the gap (test x signal x phase), fits every candidate effect on "
-             "calibration tests and scores it on held-out tests.*", "",
-             "| diagnosis | thesis evidence | where the gap lies (largest cell) | verdict | held-out gap shrink | "
-             "report |", "|---|---|---|---|---|---|"]
-    for name, what, tests, internal, evidence in runs:
-        print(f"diagnosing {what} ...", flush=True)
-        d = diagnose(twin, out / "diagnose" / name, tests=tests, internal_resistance=internal, progress=True)
-        v = d.verdict
-        c = d.report["gap_cells"][0] if d.report["gap_cells"] else None
-        where = (f"{c['test']} / {c['signal']} / {c['phase']} (NRMSE {100 * c['nrmse_before']:.0f}%, bias "
-                 f"{c['bias_before']:+.2f})") if c else "-"
-        shrink = (f"{100 * v['heldout_gap_shrink']:.0f}% (95% CI {100 * v['heldout_gap_shrink_ci'][0]:.0f}-"
-                  f"{100 * v['heldout_gap_shrink_ci'][1]:.0f}%); in-sample {100 * v['insample_gap_shrink']:.0f}%"
-                  ) if v["effect"] != "none" else "-"
-        lines.append(f"| {what} | {evidence} | {where} | **{v['effect']}** (confidence {v['confidence']:.2f}) | "
-                     f"{shrink} | [report](diagnose/{name}/report.md) |")
-    return lines
-
-
-def _demo_twin_replays(out: Path, substep: float) -> list[str]:
-    """Replay the SYNTHETIC field twin (data/field/thesis) on the base model: where the gap shows."""
-    from tqdm import tqdm
-
-    from trackenv.replay import replay
-
-    twin = Path(__file__).resolve().parent.parent / "data" / "field" / "thesis"
-    folders = sorted(p for p in twin.glob("*") if (p / "log.csv").exists())
-    if not folders:
-        return []
-    channels = ("speed_ideal", "yaw_rate", "i_left", "i_right")
-    lines = ["", "## The synthetic field twin replayed on the base model", "",
-             "*The logs in `data/field/thesis` are SYNTHETIC: reconstructed voltages simulated with unmodelled "
-             "effects and instrument noise (the truth is withheld in each folder's truth.json). Replaying them on "
-             "the base model shows where the gap lies; naming its cause is the diagnosis's job.*", "",
-             "| test | " + " | ".join(f"NRMSE {c}" for c in channels) + " |", "|---|" + "---|" * len(channels)]
-    for folder in tqdm(folders, desc="replaying the field twin", unit="test"):
-        res = replay(folder, out / "twin" / folder.name, substep=substep)
-        m = res.metrics["channels"]
-        cells = [f"{m[c]['nrmse']:.2f}" if c in m and m[c].get("nrmse") is not None else "-" for c in channels]
-        lines.append(f"| [{folder.name}](twin/{folder.name}/replay.png) | " + " | ".join(cells) + " |")
-    return lines
 
 
 REPLAY_HELP = """Replay a field test through the simulator and compare with what was measured.
@@ -268,8 +142,8 @@ def cmd_field_twin(args) -> int:
 
 
 def cmd_train(args) -> int:
-    """``trackenv train <task> --terrain T --algo ppo|sac``: train an SB3 driver (trackenv/train.py)."""
-    from trackenv.train import driver_name, load_config, resolve_algo, resolve_task, resolve_terrain, train
+    """``trackenv train <task> --terrain T --algo ppo|sac``: train an SB3 driver (trackenv/drivers/train.py)."""
+    from trackenv.drivers import driver_name, load_config, resolve_algo, resolve_task, resolve_terrain, train
 
     task, terrain, algo = resolve_task(args.task), resolve_terrain(args.terrain), resolve_algo(args.algo)
     load_config(algo, task, terrain, args.config)  # validate before anything is built
@@ -291,8 +165,8 @@ def cmd_train(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    """``trackenv evaluate <policy.zip> --task T --terrain T``: learned vs open-loop vs classical (trackenv/evaluate.py)."""
-    from trackenv.evaluate import evaluate_cli
+    """``trackenv evaluate <policy.zip> --task T``: learned vs open-loop vs classical (trackenv/drivers/episodes.py)."""
+    from trackenv.drivers.episodes import evaluate_cli
 
     try:
         return evaluate_cli(args)
@@ -346,7 +220,10 @@ def cmd_diagnose_benchmark(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from trackenv.envs.tasks import TASK_CLASSES
     from trackenv.simulate import DEFAULT_SUBSTEP
+
+    task_help = " | ".join(c.name for c in TASK_CLASSES) + f" (or {TASK_CLASSES[0].env_name} ...)"
 
     p = argparse.ArgumentParser(prog="trackenv", description="PackBot tracked-vehicle simulator (JAX).",
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
@@ -394,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--tests", nargs="+", metavar="ID", help="test ids (default: all)")
     f.set_defaults(func=cmd_field_twin)
     t = sub.add_parser("train", help="train a Stable-Baselines3 driver (configs/train/<algo>.yaml)")
-    t.add_argument("task", help="go_stop | j_turn | lane_change | zero_radius_turn (or GoStop-v0 ...)")
+    t.add_argument("task", help=task_help)
     t.add_argument("--terrain", default="dry_sand", help="terrain id of configs/terrain (default dry_sand)")
     t.add_argument("--algo", default="ppo", help="ppo | sac (default ppo)")
     t.add_argument("--config", help="training YAML (default configs/train/<algo>.yaml)")
@@ -408,7 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=cmd_train)
     e = sub.add_parser("evaluate", help="evaluate a policy zip against the open-loop and classical baselines")
     e.add_argument("policy", help="SB3 policy zip (or 'none': baselines only). SB3 zips are pickles: trusted sources only")
-    e.add_argument("--task", required=True, help="go_stop | j_turn | lane_change | zero_radius_turn (or GoStop-v0 ...)")
+    e.add_argument("--task", required=True, help=task_help)
     e.add_argument("--terrain", default="dry_sand", help="terrain id of configs/terrain (default dry_sand)")
     e.add_argument("--episodes", type=int, default=8, help="seeded episodes per method (default 8)")
     e.add_argument("--seed", type=int, default=1000, help="first episode seed (default 1000)")

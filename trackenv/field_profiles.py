@@ -60,6 +60,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .params import vehicle_voltage_limit
+
 __all__ = [
     "FIELD_DIR",
     "V_LIMIT",
@@ -71,9 +73,22 @@ __all__ = [
 
 FIELD_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "field"
 
-V_LIMIT = 24.0  # V, bus voltage (docs/model.md §2)
+V_LIMIT = vehicle_voltage_limit("packbot")  # V, the PackBot's bus voltage (configs/vehicle, docs/model.md §2)
 
-MANEUVERS = ("go_stop", "j_turn", "lane_change", "zero_radius_turn")
+def _maneuvers() -> tuple[str, ...]:
+    """The maneuver names, one per task of the registry (``trackenv.envs.tasks.MANEUVERS``; imported on first
+    use: the simulator's modules do not depend on the environments)."""
+    from .envs.tasks import MANEUVERS  # noqa: PLC0415
+
+    return MANEUVERS
+
+
+def __getattr__(name):  # MANEUVERS: the maneuvers a profile may name, from the task registry
+    if name == "MANEUVERS":
+        return _maneuvers()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 INTERNAL_RESISTANCE_MODELS = ("constant", "viscous")
 
 _TOP_KEYS = (
@@ -207,8 +222,8 @@ def load_field_profile(test_id_or_path: str | Path) -> FieldProfile:
     if tid != path.stem:
         raise fail(f"key 'id' is {tid!r} but the file is named {path.name!r}")
     maneuver = doc["maneuver"]
-    if maneuver not in MANEUVERS:
-        raise fail(f"key 'maneuver' is {maneuver!r}; expected one of {list(MANEUVERS)}")
+    if maneuver not in _maneuvers():
+        raise fail(f"key 'maneuver' is {maneuver!r}; expected one of {list(_maneuvers())}")
     terrain = doc["terrain"]
     if not isinstance(terrain, str) or not terrain:
         raise fail("key 'terrain' must be a non-empty terrain id string")

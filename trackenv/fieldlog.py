@@ -65,7 +65,6 @@ __all__ = [
     "MEASURED_COLUMNS",
     "OPTIONAL_COLUMNS",
     "LOG_COLUMNS",
-    "MANEUVERS",
     "CURRENT_SENSORS",
 ]
 
@@ -74,9 +73,22 @@ MEASURED_COLUMNS = ("i_left", "i_right", "speed_ideal", "yaw_rate")  # in the he
 REQUIRED_COLUMNS = INPUT_COLUMNS + MEASURED_COLUMNS
 OPTIONAL_COLUMNS = ("x", "y", "heading")  # may be absent from the header
 LOG_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
-MANEUVERS = ("go_stop", "j_turn", "lane_change", "zero_radius_turn")  # known; free text is accepted too
 CURRENT_SENSORS = ("absolute", "signed")
 _MISSING = ("", "nan", "na", "n/a", "null", "none")
+
+
+def _maneuvers() -> tuple[str, ...]:
+    """The maneuver names, one per task of the registry (``trackenv.envs.tasks.MANEUVERS``; imported on first
+    use: the simulator's modules do not depend on the environments)."""
+    from .envs.tasks import MANEUVERS  # noqa: PLC0415
+
+    return MANEUVERS
+
+
+def __getattr__(name):  # MANEUVERS: the known maneuvers (free text is accepted too), from the task registry
+    if name == "MANEUVERS":
+        return _maneuvers()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class FieldLogError(ValueError):
@@ -193,7 +205,7 @@ def validate_meta(meta: Any, where: str = "meta.json") -> dict:
                             f"(known: {', '.join(known)})")
     maneuver = meta["maneuver"]
     if not isinstance(maneuver, str) or not maneuver.strip():
-        raise FieldLogError(f"{where}: key 'maneuver' must be a non-empty string ({' | '.join(MANEUVERS)} or free "
+        raise FieldLogError(f"{where}: key 'maneuver' must be a non-empty string ({' | '.join(_maneuvers())} or free "
                             f"text), got {maneuver!r}")
     sensor = meta["current_sensor"]
     if sensor not in CURRENT_SENSORS:
@@ -226,9 +238,9 @@ def _read_meta(path: Path) -> dict:
 
 
 def _voltage_limit(vehicle: str) -> float:
-    from .params import load_vehicle
+    from .params import vehicle_voltage_limit
 
-    return float(np.max(np.asarray(load_vehicle(vehicle).voltage_limit)))
+    return vehicle_voltage_limit(vehicle)
 
 
 def _read_csv(path: Path, meta: dict) -> pd.DataFrame:

@@ -20,6 +20,7 @@ in :func:`replace`, to domain-randomisation ranges and (through :func:`validate_
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 from typing import Any, Literal
@@ -476,6 +477,12 @@ def load_terrain(name_or_path: str | Path = "dry_sand", dtype=jnp.float32) -> tu
         "viscous": num("internal_resistance_viscous"),
     }
     return terrain, internal
+
+
+@functools.cache
+def vehicle_voltage_limit(name_or_path: str | Path = "packbot") -> float:
+    """The bus voltage limit [V] of a vehicle config (its ``voltage_limit``; ``packbot``: 24 V)."""
+    return float(np.max(np.asarray(load_vehicle(name_or_path).voltage_limit)))
 
 
 def load_params(

@@ -98,8 +98,13 @@ class VoltageProfile(eqx.Module):
         return interpolate(self.t, self.volts, t)
 
 
-def validate_profile(t, volts, limit: float = 24.0, source: str = "profile") -> None:
-    """Raise ``ValueError`` naming the sample and channel for a bad profile."""
+def validate_profile(t, volts, limit: float | None = None, source: str = "profile") -> None:
+    """Raise ``ValueError`` naming the sample and channel for a bad profile; ``limit`` [V]: the bus voltage
+    (default: the PackBot's ``voltage_limit``, configs/vehicle/packbot.yaml)."""
+    if limit is None:
+        from .params import vehicle_voltage_limit  # noqa: PLC0415
+
+        limit = vehicle_voltage_limit("packbot")
     if t.ndim != 1 or t.shape[0] < 1:
         raise ValueError(f"{source}: time must be a 1-D array with at least one sample, got shape {t.shape}")
     if volts.ndim < 2 or volts.shape[0] != t.shape[0] or volts.shape[1] != 2:

@@ -27,8 +27,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 torch.set_num_threads(1)
 
-from trackenv.evaluate import _jsonable, evaluate, format_table  # noqa: E402
-from trackenv.train import ENV_NAME, load_policy  # noqa: E402
+from trackenv.drivers import ENV_NAME, evaluate, format_table, load_policy  # noqa: E402
+from trackenv.drivers.episodes import jsonable  # noqa: E402
 
 SOILS = ("dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")
 
@@ -57,7 +57,7 @@ def main(only=None):
                                       figures=ROOT / "train" / "figures")
             rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
             rec["table_5_6"] = evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
-            results[name] = _jsonable(rec)
+            results[name] = jsonable(rec)
             out_json.write_text(json.dumps(results, indent=1) + "\n")
             print(f"{name}: {time.time() - t0:.0f} s", flush=True)
             print(format_table(rec["nominal"]), flush=True)

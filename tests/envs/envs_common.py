@@ -1,4 +1,6 @@
 """Shared constants of the environment tests."""
 
-ENV_IDS = ["trackenv/GoStop-v0", "trackenv/JTurn-v0", "trackenv/LaneChange-v0", "trackenv/ZeroRadiusTurn-v0"]
+from trackenv.envs import ENV_IDS as _REGISTERED
+
+ENV_IDS = list(_REGISTERED)  # one per task of trackenv.envs.tasks.TASK_CLASSES
 TERRAINS = ["dry_sand", "asphalt"]

@@ -6,7 +6,7 @@ import pytest
 from envs_common import ENV_IDS, TERRAINS
 
 import trackenv  # noqa: F401
-from trackenv.envs import baselines
+from trackenv.envs import controllers
 
 
 def run(env, policy, seed=0):
@@ -40,7 +40,7 @@ def test_go_stop_thesis_input_beats_zero_voltage():
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_scripted_driver_succeeds(env_id, terrain):
     env = gym.make(env_id, terrain=terrain)
-    driver = baselines.make_driver(env)
+    driver = controllers.make_driver(env)
     total, term, trunc, info = run(env, lambda k, o: driver(o))
     assert term and info["success"] and not info["off_course"], info
     assert info["completion"] == pytest.approx(1.0, abs=0.05)

@@ -1,6 +1,7 @@
 """Gymnasium environments of the PackBot maneuvers (thesis Fig. 4.9, §5.3).
 
-Importing this package (or ``trackenv``) registers::
+Importing this package (or ``trackenv``) registers one environment per task of
+:data:`trackenv.envs.tasks.TASK_CLASSES`::
 
     trackenv/GoStop-v0          go-stop: reach and hold a speed, stop at a mark
     trackenv/JTurn-v0           J-turn: straight run, turn through a heading change, stop
@@ -22,29 +23,22 @@ import gymnasium as gym
 
 from . import core
 from .core import EnvParams, EnvState, StepResult, make_params, reset, step, step_autoreset
+from .tasks import TASK_CLASSES
 
-ENV_IDS = {
-    "trackenv/GoStop-v0": "GoStopEnv",
-    "trackenv/JTurn-v0": "JTurnEnv",
-    "trackenv/LaneChange-v0": "LaneChangeEnv",
-    "trackenv/ZeroRadiusTurn-v0": "ZeroRadiusTurnEnv",
-}
-TASK_OF_ID = {
-    "trackenv/GoStop-v0": "go_stop",
-    "trackenv/JTurn-v0": "j_turn",
-    "trackenv/LaneChange-v0": "lane_change",
-    "trackenv/ZeroRadiusTurn-v0": "zero_radius_turn",
-}
+# Derived from the task registry (trackenv.envs.tasks.TASK_CLASSES): env id -> env class name in
+# trackenv.envs.gym_env (the vector class is the same name with VectorEnv), and env id -> task id.
+ENV_IDS = {cls.env_id: f"{cls.__name__}Env" for cls in TASK_CLASSES}
+TASK_OF_ID = {cls.env_id: cls.name for cls in TASK_CLASSES}
 
 
 def _register() -> None:
-    for env_id, cls in ENV_IDS.items():
-        if env_id in gym.registry:
+    for cls in TASK_CLASSES:
+        if cls.env_id in gym.registry:
             continue
         gym.register(
-            id=env_id,
-            entry_point=f"trackenv.envs.gym_env:{cls}",
-            vector_entry_point=f"trackenv.envs.vector:{cls.replace('Env', 'VectorEnv')}",
+            id=cls.env_id,
+            entry_point=f"trackenv.envs.gym_env:{cls.__name__}Env",
+            vector_entry_point=f"trackenv.envs.vector:{cls.__name__}VectorEnv",
             disable_env_checker=False,
         )
 

@@ -154,7 +154,7 @@ def make_params(
     sim_params: Params | None = None,
     **task_kwargs,
 ) -> EnvParams:
-    """Build :class:`EnvParams` for ``task`` ('go_stop', 'j_turn', 'lane_change', 'zero_radius_turn').
+    """Build :class:`EnvParams` for ``task``, a task id of :data:`trackenv.envs.tasks.TASKS` (``go_stop`` ...).
 
     ``task_kwargs`` are the task's options (targets as numbers or (low, high) ranges, tolerances,
     ``max_time``, ``reward`` = dict of :class:`RewardParams` fields); see each task class.

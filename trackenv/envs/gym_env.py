@@ -260,43 +260,42 @@ def check_keywords(task: str, task_kwargs: dict) -> None:
     """``TypeError`` for a keyword neither the environment nor the task accepts, listing all accepted ones."""
     import difflib
 
-    from .tasks import TASKS
+    from .tasks import TASKS  # noqa: PLC0415
 
     if task not in TASKS:
         return  # make_params reports the unknown task
-    accepted = sorted(set(ENV_KEYWORDS) | set(TASKS[task].DEFAULTS))
-    unknown = sorted(set(task_kwargs) - set(TASKS[task].DEFAULTS))
+    options = TASKS[task].default_params()
+    accepted = sorted(set(ENV_KEYWORDS) | set(options))
+    unknown = sorted(set(task_kwargs) - set(options))
     if unknown:
         close = difflib.get_close_matches(unknown[0], accepted, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise TypeError(f"{task}: unknown option(s) {unknown}{hint}; accepted: {', '.join(accepted)}")
 
 
-def _task_env(task_name: str, doc: str):
-    class _Env(TrackEnv):
-        __doc__ = doc
+def _task_env(task_cls) -> type[TrackEnv]:
+    """The ``gymnasium.Env`` class of one task (``<TaskClass>Env``, the entry point of its env id)."""
 
+    class _Env(TrackEnv):
         def __init__(self, **kwargs):
             if "task" in kwargs:
                 raise TypeError("the task is fixed by the environment id")
-            super().__init__(task_name, **kwargs)
+            super().__init__(task_cls.name, **kwargs)
 
+    _Env.__doc__ = (f"``gym.make('{task_cls.env_id}')``: TrackEnv with the {task_cls.__name__} task.\n\n"
+                    + (task_cls.__doc__ or "") + "\n\nCommon options, observation tail, info: see "
+                    "``trackenv.envs.gym_env`` and ``trackenv.envs.core``.")
+    _Env.__name__ = _Env.__qualname__ = f"{task_cls.__name__}Env"
+    _Env.__module__ = __name__
     return _Env
 
 
-def _doc(task_cls, env_id):
-    return (f"``gym.make('{env_id}')``: TrackEnv with the {task_cls.__name__} task.\n\n"
-            + (task_cls.__doc__ or "") + "\n\nCommon options, observation tail, info: see "
-            "``trackenv.envs.gym_env`` and ``trackenv.envs.core``.")
+def _define_task_envs() -> dict[str, type[TrackEnv]]:
+    from .tasks import TASK_CLASSES  # noqa: PLC0415
+
+    classes = {c.__name__: c for c in map(_task_env, TASK_CLASSES)}
+    globals().update(classes)  # GoStopEnv, JTurnEnv, ... (the registered entry points)
+    return classes
 
 
-from .tasks import GoStop, JTurn, LaneChange, ZeroRadiusTurn  # noqa: E402
-
-GoStopEnv = _task_env("go_stop", _doc(GoStop, "trackenv/GoStop-v0"))
-GoStopEnv.__name__ = GoStopEnv.__qualname__ = "GoStopEnv"
-JTurnEnv = _task_env("j_turn", _doc(JTurn, "trackenv/JTurn-v0"))
-JTurnEnv.__name__ = JTurnEnv.__qualname__ = "JTurnEnv"
-LaneChangeEnv = _task_env("lane_change", _doc(LaneChange, "trackenv/LaneChange-v0"))
-LaneChangeEnv.__name__ = LaneChangeEnv.__qualname__ = "LaneChangeEnv"
-ZeroRadiusTurnEnv = _task_env("zero_radius_turn", _doc(ZeroRadiusTurn, "trackenv/ZeroRadiusTurn-v0"))
-ZeroRadiusTurnEnv.__name__ = ZeroRadiusTurnEnv.__qualname__ = "ZeroRadiusTurnEnv"
+TASK_ENVS = _define_task_envs()  # env class name -> class, one per task of trackenv.envs.tasks.TASK_CLASSES

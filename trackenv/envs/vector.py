@@ -322,24 +322,31 @@ class TrackVectorEnv(VectorEnv):
         return dict(zip(names, jax.tree.leaves(phys)))
 
 
-def _task_vector_env(task_name: str):
+def _task_vector_env(task_cls) -> type[TrackVectorEnv]:
+    """The ``VectorEnv`` class of one task (``<TaskClass>VectorEnv``, the vector entry point of its env id)."""
+
     class _V(TrackVectorEnv):
         def __init__(self, num_envs: int = 8, **kwargs):
             kwargs.pop("max_episode_steps", None)
             if "task" in kwargs:
                 raise TypeError("the task is fixed by the environment id")
-            super().__init__(task_name, num_envs, **kwargs)
+            super().__init__(task_cls.name, num_envs, **kwargs)
 
+    _V.__doc__ = f"``gym.make_vec('{task_cls.env_id}', num_envs=N)``: TrackVectorEnv with the {task_cls.__name__} task."
+    _V.__name__ = _V.__qualname__ = f"{task_cls.__name__}VectorEnv"
+    _V.__module__ = __name__
     return _V
 
 
-GoStopVectorEnv = _task_vector_env("go_stop")
-JTurnVectorEnv = _task_vector_env("j_turn")
-LaneChangeVectorEnv = _task_vector_env("lane_change")
-ZeroRadiusTurnVectorEnv = _task_vector_env("zero_radius_turn")
-for _cls, _n in ((GoStopVectorEnv, "GoStopVectorEnv"), (JTurnVectorEnv, "JTurnVectorEnv"),
-                 (LaneChangeVectorEnv, "LaneChangeVectorEnv"), (ZeroRadiusTurnVectorEnv, "ZeroRadiusTurnVectorEnv")):
-    _cls.__name__ = _cls.__qualname__ = _n
+def _define_task_vector_envs() -> dict[str, type[TrackVectorEnv]]:
+    from .tasks import TASK_CLASSES  # noqa: PLC0415
+
+    classes = {c.__name__: c for c in map(_task_vector_env, TASK_CLASSES)}
+    globals().update(classes)  # GoStopVectorEnv, JTurnVectorEnv, ... (the registered vector entry points)
+    return classes
+
+
+TASK_VECTOR_ENVS = _define_task_vector_envs()  # class name -> class, one per task of TASK_CLASSES
 
 
 # ----------------------------------------------------------------------------------------------

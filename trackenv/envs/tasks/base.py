@@ -9,11 +9,19 @@ vehicle. The environment core (:mod:`trackenv.envs.core`) calls them in this ord
     tstate, ev = task.evaluate(tstate, physics_state, sim_params)   # after every control step
 
 Targets given as a range ``(low, high)`` are sampled uniformly per episode; a single number fixes them.
+
+Each task class also owns its facts outside the simulation (class variables, see :class:`Task`): the
+Gymnasium env name and id, the primary tracking error with its unit and kernel scale, the host-side
+reference laws the scripted and PI controllers use (:mod:`trackenv.envs.controllers`), the id prefix
+of its reconstructed thesis voltage profiles (``configs/field``) and its default options
+(``DEFAULTS``). The registry :data:`trackenv.envs.tasks.TASK_CLASSES` lists the tasks once; the
+environment registration, the env classes and the training and evaluation names derive from it.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
@@ -36,6 +44,26 @@ class TaskEval(NamedTuple):
     success: jax.Array  # bool
     off_course: jax.Array  # bool
     completion: jax.Array  # [0, 1] progress through the maneuver
+
+
+class PrimaryError(NamedTuple):
+    """A task's primary tracking error: the quantity of :attr:`TaskEval.error` and of the tracking-RMSE metric."""
+
+    obs_name: str  # the observation entry that carries it
+    unit: str  # its SI unit
+    quantity: str  # what it measures, in words
+    scale: float  # the scale of its tracking kernel in the reward [unit]
+
+    @property
+    def label(self) -> str:
+        """``unit (quantity)``, e.g. ``m/s (speed)``: the unit of the tracking RMSE in tables."""
+        return f"{self.unit} ({self.quantity})"
+
+
+# The tracking kernels of the path-following tasks (J-turn, lane change): m/s, m, rad, rad/s; their primary
+# error is the cross-track error.
+PATH_KERNEL_SCALES = {"speed_error": 0.2, "cross_track": 0.15, "heading_error": 0.25, "yaw_rate_error": 0.5}
+PATH_PRIMARY_ERROR = PrimaryError("cross_track", "m", "cross-track", PATH_KERNEL_SCALES["cross_track"])
 
 
 class RewardParams(eqx.Module):
@@ -115,13 +143,70 @@ def split_task_kwargs(defaults: dict, kwargs: dict, task: str) -> dict:
     return {**defaults, **kwargs}
 
 
+# Observation columns -> float64 array: how the host-side reference laws read an observation.
+Columns = Callable[[str], np.ndarray]
+
+
 class Task(eqx.Module):
-    """Interface of a task (see the module docstring). Subclasses set the class variables."""
+    """Interface of a task (see the module docstring). Subclasses set the class variables.
+
+    Class variables (the task's facts, read by the environment registration, the controllers, training
+    and evaluation):
+
+    ``name``            the task id (``go_stop``)
+    ``env_name``        the Gymnasium env name (``GoStop-v0``); ``env_id`` = ``trackenv/<env_name>`` is derived
+    ``field_profile``   the id prefix of the task's reconstructed thesis voltage profiles,
+                        ``configs/field/<field_profile>_<terrain>.yaml``
+    ``kernel_scales``   the scales of the Gaussian tracking kernels of the reward, by error name (SI)
+    ``primary_error``   the :class:`PrimaryError` (its scale is the kernel scale of that error)
+    ``steering``        how the controllers steer: ``"heading"`` (hold the line on heading and lateral
+                        offset, no reference yaw rate), ``"path"`` (yaw-rate loop on the path's
+                        reference yaw rate plus heading and cross-track corrections) or ``"spin"``
+                        (zero mean voltage, yaw-rate loop only)
+    ``DEFAULTS``        the default options of :meth:`create` (targets, tolerances, ``max_time``)
+    """
 
     name: ClassVar[str] = "task"
+    env_name: ClassVar[str] = ""
+    env_id: ClassVar[str] = ""
+    field_profile: ClassVar[str] = ""
+    kernel_scales: ClassVar[dict[str, float]] = {}
+    primary_error: ClassVar[PrimaryError]
+    steering: ClassVar[str] = "path"
+    DEFAULTS: ClassVar[dict[str, Any]] = {}
     obs_names: ClassVar[tuple[str, ...]] = ()
     obs_low: ClassVar[np.ndarray] = np.zeros(0, np.float32)
     obs_high: ClassVar[np.ndarray] = np.zeros(0, np.float32)
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.env_id = f"trackenv/{cls.env_name}"
+
+    @classmethod
+    def default_params(cls) -> dict[str, Any]:
+        """The default options of :meth:`create` (a copy of ``DEFAULTS``; gymnax's ``default_params``)."""
+        return dict(cls.DEFAULTS)
+
+    @classmethod
+    def create(cls, **kwargs) -> tuple[Task, float]:  # pragma: no cover - interface
+        """The task from its options (``DEFAULTS`` overridden by ``kwargs``) and the episode's ``max_time`` [s]."""
+        raise NotImplementedError
+
+    # -- host-side reference laws (numpy, on observation columns; used by trackenv.envs.controllers) --
+
+    @staticmethod
+    def reference_speed(col: Columns, v_star: float, a_b: float) -> np.ndarray | None:  # pragma: no cover
+        """The controllers' reference forward speed v_ref [m/s] from the observation columns, the cruise
+        speed ``v_star`` [m/s] and the braking deceleration ``a_b`` [m/s^2]; ``None``: no speed loop."""
+        raise NotImplementedError
+
+    @staticmethod
+    def reference_yaw_rate(col: Columns) -> np.ndarray | float:
+        """The controllers' reference yaw rate r_ref [rad/s]: the path's v_ref kappa, recovered from the
+        observation as yaw_rate_error + yaw_rate (tasks steering on heading override this with 0)."""
+        return col("yaw_rate_error") + col("yaw_rate")
+
+    # -- simulation (pure jnp, jit/vmap-able) --
 
     def init(self, key, sim) -> dict:  # pragma: no cover - interface
         raise NotImplementedError

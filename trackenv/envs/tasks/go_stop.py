@@ -10,6 +10,7 @@ import numpy as np
 
 from ..paths import wrap_angle
 from .base import (
+    PrimaryError,
     RewardParams,
     Task,
     TaskEval,
@@ -67,6 +68,11 @@ class GoStop(Task):
     """
 
     name = "go_stop"
+    env_name = "GoStop-v0"
+    field_profile = "go_stop"
+    kernel_scales = {"speed_error": 0.2, "cross_track": 0.2, "heading_error": 0.2}  # m/s, m, rad
+    primary_error = PrimaryError("speed_error", "m/s", "speed", kernel_scales["speed_error"])
+    steering = "heading"
     obs_names, obs_low, obs_high = obs_bounds(_OBS)
 
     reward: RewardParams
@@ -97,6 +103,17 @@ class GoStop(Task):
         )
         return task, float(o["max_time"])
 
+    @staticmethod
+    def reference_speed(col, v_star, a_b):
+        """v_ref = min(v*, sqrt(2 a_b max(d, 0))) with v* and d = distance_to_mark read from the observation
+        (``v_star`` is not used: the episode's target speed is observed)."""
+        return np.minimum(col("target_speed"), np.sqrt(2.0 * a_b * np.maximum(col("distance_to_mark"), 0.0)))
+
+    @staticmethod
+    def reference_yaw_rate(col):
+        """0: a straight line."""
+        return 0.0
+
     def init(self, key, sim) -> dict:
         k1, k2 = jax.random.split(key)
         return {"target_speed": sample(k1, self.target_speed), "mark": sample(k2, self.mark_distance)}
@@ -114,7 +131,9 @@ class GoStop(Task):
 
     def evaluate(self, ts, phys, sim):
         x, y, psi, dist, _, e_v = self._errors(ts, phys)
-        tracking = 0.6 * kernel(e_v, 0.2) + 0.2 * kernel(y, 0.2) + 0.2 * kernel(psi, 0.2)
+        s = self.kernel_scales
+        tracking = (0.6 * kernel(e_v, s["speed_error"]) + 0.2 * kernel(y, s["cross_track"])
+                    + 0.2 * kernel(psi, s["heading_error"]))
         success = (jnp.abs(dist) <= self.stop_tolerance) & is_stopped(phys, 0.05, 0.5)
         off = (jnp.abs(y) > self.lateral_limit) | (jnp.abs(psi) > self.heading_limit) | (dist < -self.overshoot_limit) | (x < -0.5)
         completion = jnp.clip(x / ts["mark"], 0.0, 1.0)

@@ -11,6 +11,8 @@ import numpy as np
 
 from .. import paths
 from .base import (
+    PATH_KERNEL_SCALES,
+    PATH_PRIMARY_ERROR,
     RewardParams,
     Task,
     TaskEval,
@@ -82,7 +84,17 @@ class JTurn(Task):
     """
 
     name = "j_turn"
+    env_name = "JTurn-v0"
+    field_profile = "j_turn"
+    kernel_scales = PATH_KERNEL_SCALES
+    primary_error = PATH_PRIMARY_ERROR
+    steering = "path"
     obs_names, obs_low, obs_high = obs_bounds(_OBS)
+
+    @staticmethod
+    def reference_speed(col, v_star, a_b):
+        """v_ref = min(v*, sqrt(2 a_b max(d, 0))), d = distance_to_go along the path to the stop point."""
+        return np.minimum(v_star, np.sqrt(2.0 * a_b * np.maximum(col("distance_to_go"), 0.0)))
 
     reward: RewardParams
     target_speed: jax.Array  # m/s (low, high)
@@ -157,7 +169,9 @@ class JTurn(Task):
     def evaluate(self, ts, phys, sim):
         proj, to_go, _, e_v, e_psi, e_r = self._errors(ts, phys)
         e_y = proj.cross_track
-        tracking = 0.4 * kernel(e_v, 0.2) + 0.3 * kernel(e_y, 0.15) + 0.2 * kernel(e_psi, 0.25) + 0.1 * kernel(e_r, 0.5)
+        s = self.kernel_scales
+        tracking = (0.4 * kernel(e_v, s["speed_error"]) + 0.3 * kernel(e_y, s["cross_track"])
+                    + 0.2 * kernel(e_psi, s["heading_error"]) + 0.1 * kernel(e_r, s["yaw_rate_error"]))
         end = jnp.interp(ts["length"], ts["path"].s, ts["path"].xy[:, 0]), jnp.interp(ts["length"], ts["path"].s, ts["path"].xy[:, 1])
         dist_end = jnp.sqrt((phys.pose[0] - end[0]) ** 2 + (phys.pose[1] - end[1]) ** 2)
         heading_ok = jnp.abs(paths.wrap_angle(ts["final_heading"] - phys.pose[2])) <= self.heading_tolerance

@@ -13,6 +13,8 @@ from .. import paths
 from .base import (
     FOOTPRINT_LENGTH,
     FOOTPRINT_WIDTH,
+    PATH_KERNEL_SCALES,
+    PATH_PRIMARY_ERROR,
     RewardParams,
     Task,
     TaskEval,
@@ -86,7 +88,17 @@ class LaneChange(Task):
     """
 
     name = "lane_change"
+    env_name = "LaneChange-v0"
+    field_profile = "lane_change"
+    kernel_scales = PATH_KERNEL_SCALES
+    primary_error = PATH_PRIMARY_ERROR
+    steering = "path"
     obs_names, obs_low, obs_high = obs_bounds(_OBS)
+
+    @staticmethod
+    def reference_speed(col, v_star, a_b):
+        """v_ref = v* throughout (the course ends at the finish line, no stop)."""
+        return np.full(np.shape(col("speed_error")), v_star)
 
     reward: RewardParams
     target_speed: jax.Array  # m/s (low, high)
@@ -193,7 +205,9 @@ class LaneChange(Task):
     def evaluate(self, ts, phys, sim):
         proj, e_v, e_psi, e_r = self._errors(ts, phys)
         e_y = proj.cross_track
-        tracking = 0.3 * kernel(e_v, 0.2) + 0.4 * kernel(e_y, 0.15) + 0.2 * kernel(e_psi, 0.25) + 0.1 * kernel(e_r, 0.5)
+        s = self.kernel_scales
+        tracking = (0.3 * kernel(e_v, s["speed_error"]) + 0.4 * kernel(e_y, s["cross_track"])
+                    + 0.2 * kernel(e_psi, s["heading_error"]) + 0.1 * kernel(e_r, s["yaw_rate_error"]))
         cx, cy = self._corners(phys)  # (4,)
         inside_x = (cx[:, None] >= ts["gate_start"][None]) & (cx[:, None] <= ts["gate_end"][None])  # (4, 3)
         outside_y = jnp.abs(cy[:, None] - ts["gate_centre"][None]) > 0.5 * self.lane_widths[None]

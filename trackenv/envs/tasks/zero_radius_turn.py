@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 
 from .base import (
+    PrimaryError,
     RewardParams,
     Task,
     TaskEval,
@@ -60,7 +61,17 @@ class ZeroRadiusTurn(Task):
     """
 
     name = "zero_radius_turn"
+    env_name = "ZeroRadiusTurn-v0"
+    field_profile = "zero_radius_turn"
+    kernel_scales = {"yaw_rate_error": 0.5, "drift": 0.1}  # rad/s, m
+    primary_error = PrimaryError("yaw_rate_error", "rad/s", "yaw rate", kernel_scales["yaw_rate_error"])
+    steering = "spin"
     obs_names, obs_low, obs_high = obs_bounds(_OBS)
+
+    @staticmethod
+    def reference_speed(col, v_star, a_b):
+        """None: no speed loop (the mean voltage is 0 in a spin in place)."""
+        return None
 
     reward: RewardParams
     target_yaw_rate: jax.Array  # rad/s (low, high), signed; must not include 0
@@ -111,7 +122,7 @@ class ZeroRadiusTurn(Task):
     def evaluate(self, ts, phys, sim):
         sign, to_go, _, e_r = self._errors(ts, phys)
         drift = jnp.sqrt(phys.pose[0] ** 2 + phys.pose[1] ** 2)
-        tracking = 0.7 * kernel(e_r, 0.5) + 0.3 * kernel(drift, 0.1)
+        tracking = 0.7 * kernel(e_r, self.kernel_scales["yaw_rate_error"]) + 0.3 * kernel(drift, self.kernel_scales["drift"])
         success = ((jnp.abs(to_go) <= self.angle_tolerance) & (jnp.abs(phys.vel[2]) < 0.1)
                    & is_stopped(phys, 0.05, 0.5) & (drift <= self.drift_tolerance))
         off = (drift > self.drift_limit) | (sign * to_go < -self.overshoot_limit)

@@ -1,0 +1,263 @@
+"""Names and training configs of the SB3 drivers: tasks, terrains, algorithms, RL-Zoo-style YAML.
+
+Configs (``configs/train/<algo>.yaml``) follow the RL Baselines3 Zoo layout: one section per
+environment name (one per task of :data:`trackenv.envs.tasks.TASK_CLASSES`: ``GoStop-v0``,
+``JTurn-v0`` ...) merged over a ``default`` section; optional ``<EnvName>-<terrain>`` sections
+(e.g. ``JTurn-v0-asphalt``) are merged last. Keys of a section:
+
+==================  ==============================================================================
+n_envs              environments in the native vector env (one jitted, vmapped call per step)
+n_timesteps         total environment steps
+policy              ``MlpPolicy``
+policy_kwargs       dict: ``net_arch`` (list or dict), ``activation_fn`` (``tanh``/``relu``/``elu``),
+                    ``log_std_init``, ``ortho_init``, ``squash_output`` ... (SB3's policy kwargs)
+env_kwargs          dict passed to :class:`~trackenv.envs.vector.TrackVectorEnv` (``control_dt``,
+                    ``substep``, ``domain_randomization``, task options such as ``max_time``)
+checkpoint_freq     environment steps between checkpoints (default 100 000)
+residual            0 (default): the policy's action is the voltages; r > 0: a **residual** driver, the
+                    voltages are the classical PI controller's (trackenv.envs.controllers.ClassicalController,
+                    gains of configs/train/classical_gains.yaml) plus r x the policy's action, all in
+                    units of the vehicle's voltage limit (the gains and r are stored in the zip; see train/README.md)
+error_weight        w >= 0 (default 0): training reward shaping, r - w (e / s)^2 with e the task's
+                    primary tracking error (``Task.primary_error``, the evaluated RMSE's) read from the next
+                    observation and s its kernel scale; the environment's reward kernels saturate for large
+                    errors, the RMSE does not. VecMonitor (and the reported returns) see the unshaped reward
+any other key       a keyword of the algorithm's constructor (``learning_rate``, ``n_steps``,
+                    ``batch_size``, ``gamma``, ``gae_lambda``, ``ent_coef``, ``clip_range``,
+                    ``n_epochs``, ``buffer_size``, ``train_freq``, ...), checked against its signature
+==================  ==============================================================================
+
+An unknown key, task, terrain or algorithm raises :class:`~trackenv.params.ConfigError` naming the
+file and key **before** any environment is built or any training starts.
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ..envs.tasks import ENV_NAMES, task_class
+from ..envs.tasks import TASKS as TASK_CLASSES
+from ..params import CONFIG_DIR as _CONFIGS
+from ..params import ConfigError
+
+ROOT = Path(__file__).resolve().parent.parent.parent  # the repository
+CONFIG_DIR = _CONFIGS / "train"
+DRIVERS_DIR = ROOT / "train" / "drivers"
+
+TASKS = tuple(TASK_CLASSES)  # task ids, from the task registry
+ENV_NAME = ENV_NAMES  # task id -> env name
+TERRAINS = ("dry_sand", "asphalt")  # the shipped drivers' terrains; any configs/terrain id trains
+ALGOS = ("ppo", "sac")
+META_KEYS = ("n_envs", "n_timesteps", "policy", "policy_kwargs", "env_kwargs", "checkpoint_freq", "residual",
+             "error_weight")
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
+
+
+# ----------------------------------------------------------------------------------------------
+# names
+
+
+def resolve_task(task: str) -> str:
+    """Task id from a task id (``j_turn``), an env name (``JTurn-v0``) or an env id (``trackenv/JTurn-v0``)."""
+    return task_class(task).name
+
+
+def resolve_terrain(terrain: str) -> str:
+    """A terrain id of configs/terrain (``dry_sand``, ``asphalt``, ``sandy_loam_1`` ...), checked."""
+    known = _terrain_ids()
+    if terrain not in known:
+        raise ConfigError(f"unknown terrain {terrain!r}; known: {', '.join(known)}")
+    return terrain
+
+
+def resolve_algo(algo: str) -> str:
+    a = str(algo).lower()
+    if a not in ALGOS:
+        raise ConfigError(f"unknown algorithm {algo!r}; known: {', '.join(ALGOS)}")
+    return a
+
+
+def algo_class(algo: str):
+    import stable_baselines3 as sb3  # noqa: PLC0415
+
+    return {"ppo": sb3.PPO, "sac": sb3.SAC}[resolve_algo(algo)]
+
+
+def driver_name(task: str, terrain: str) -> str:
+    """``<EnvName>-<terrain>``, e.g. ``JTurn-v0-dry_sand`` (the shipped zip's stem)."""
+    return f"{task_class(task).env_name}-{terrain}"
+
+
+def repo_relative(path: str | Path | None) -> str | None:
+    """``path`` relative to the repository when it lies inside it (as written into the JSON records), else as given."""
+    if path is None:
+        return None
+    p = Path(path)
+    try:
+        return Path(os.path.relpath(p.resolve(), ROOT)).as_posix() if p.resolve().is_relative_to(ROOT) else str(p)
+    except (OSError, ValueError):
+        return str(p)
+
+
+def _terrain_ids() -> list[str]:
+    from ..params import list_terrains  # noqa: PLC0415
+
+    return list_terrains()
+
+
+# ----------------------------------------------------------------------------------------------
+# configs
+
+
+def _allowed_algo_keys(algo: str) -> set[str]:
+    cls = algo_class(algo)
+    sig = inspect.signature(cls.__init__)
+    skip = {"self", "policy", "env", "policy_kwargs", "tensorboard_log", "verbose", "seed", "device",
+            "_init_setup_model", "kwargs"}
+    return {k for k in sig.parameters if k not in skip}
+
+
+def _check_section(section: Any, where: str, allowed: set[str]) -> dict:
+    if section is None:
+        return {}
+    if not isinstance(section, dict):
+        raise ConfigError(f"{where}: must be a mapping of hyperparameters, got {type(section).__name__}")
+    for k in section:
+        if k not in allowed:
+            raise ConfigError(f"{where}: unknown key '{k}'; allowed: {', '.join(sorted(allowed))}")
+    return section
+
+
+def config_path(algo: str, config: str | Path | None = None) -> Path:
+    return Path(config) if config is not None else CONFIG_DIR / f"{resolve_algo(algo)}.yaml"
+
+
+def load_config(algo: str, task: str, terrain: str | None = None, config: str | Path | dict | None = None) -> dict:
+    """The validated hyperparameters for ``algo`` on ``task`` (and ``terrain``), RL Zoo style.
+
+    ``config``: a YAML path (default ``configs/train/<algo>.yaml``) or a ready dict of the same layout.
+    Raises :class:`ConfigError` naming the file and the key on any unknown key or bad value.
+    """
+    algo = resolve_algo(algo)
+    env_name = task_class(task).env_name
+    if isinstance(config, dict):
+        raw, where = copy.deepcopy(config), "config"
+    else:
+        path = config_path(algo, config)
+        if not path.is_file():
+            raise ConfigError(f"training config not found: {path}")
+        try:
+            raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+        where = str(path)
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: must be a mapping of sections (default, <EnvName>, <EnvName>-<terrain>)")
+    allowed = set(META_KEYS) | _allowed_algo_keys(algo)
+    names = set(ENV_NAME.values())
+    sections = {"default"} | names | {f"{n}-{t}" for n in names for t in _terrain_ids()}
+    for key in raw:
+        if key not in sections:
+            raise ConfigError(f"{where}: unknown section '{key}'; sections are 'default', an env name "
+                              f"({', '.join(sorted(names))}) or '<EnvName>-<terrain>'")
+        _check_section(raw[key], f"{where} [{key}]", allowed)
+    merged: dict = {}
+    order = ["default", env_name] + ([f"{env_name}-{terrain}"] if terrain else [])
+    for key in order:
+        for k, v in (raw.get(key) or {}).items():
+            if isinstance(v, dict) and isinstance(merged.get(k), dict):
+                merged[k] = {**merged[k], **v}
+            else:
+                merged[k] = copy.deepcopy(v)
+    return _validate_values(merged, f"{where} [{' + '.join(k for k in order if k in raw)}]")
+
+
+def _validate_values(cfg: dict, where: str) -> dict:
+    cfg = dict(cfg)
+    cfg.setdefault("policy", "MlpPolicy")
+    cfg.setdefault("n_envs", 64)
+    cfg.setdefault("checkpoint_freq", 100_000)
+    cfg.setdefault("policy_kwargs", {})
+    cfg.setdefault("env_kwargs", {})
+    cfg.setdefault("residual", 0.0)
+    r = cfg["residual"]
+    if isinstance(r, bool) or not isinstance(r, (int, float)) or not (0.0 <= float(r) <= 2.0):
+        raise ConfigError(f"{where}: 'residual' must be a number in [0, 2] (0: plain policy), got {r!r}")
+    cfg["residual"] = float(r)
+    cfg.setdefault("error_weight", 0.0)
+    w = cfg["error_weight"]
+    if isinstance(w, bool) or not isinstance(w, (int, float)) or not (0.0 <= float(w) < 1e3):
+        raise ConfigError(f"{where}: 'error_weight' must be a non-negative number, got {w!r}")
+    cfg["error_weight"] = float(w)
+    if "n_timesteps" not in cfg:
+        raise ConfigError(f"{where}: missing key 'n_timesteps'")
+    for k in ("n_envs", "n_timesteps", "checkpoint_freq"):
+        v = cfg[k]
+        if isinstance(v, float) and v.is_integer():
+            v = cfg[k] = int(v)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ConfigError(f"{where}: '{k}' must be a positive integer, got {v!r}")
+    if cfg["policy"] != "MlpPolicy":
+        raise ConfigError(f"{where}: 'policy' must be 'MlpPolicy', got {cfg['policy']!r}")
+    for k in ("policy_kwargs", "env_kwargs"):
+        if not isinstance(cfg[k], dict):
+            raise ConfigError(f"{where}: '{k}' must be a mapping, got {cfg[k]!r}")
+    act = cfg["policy_kwargs"].get("activation_fn")
+    if act is not None and act not in ACTIVATIONS:
+        raise ConfigError(f"{where}: policy_kwargs.activation_fn must be one of {ACTIVATIONS}, got {act!r}")
+    bad_env = sorted(set(cfg["env_kwargs"]) & {"normalize_action", "autoreset_mode", "terrain", "task", "num_envs"})
+    if bad_env:
+        raise ConfigError(f"{where}: env_kwargs may not set {bad_env} (fixed by the trainer / command line)")
+    for k in ("learning_rate", "gamma", "gae_lambda", "ent_coef", "clip_range", "tau", "vf_coef", "max_grad_norm"):
+        if k in cfg and not (isinstance(cfg[k], (int, float)) and not isinstance(cfg[k], bool)
+                             and np.isfinite(cfg[k]) and cfg[k] >= 0):
+            if not (k == "ent_coef" and isinstance(cfg[k], str) and cfg[k].startswith("auto")):
+                raise ConfigError(f"{where}: '{k}' must be a non-negative number, got {cfg[k]!r}")
+    return cfg
+
+
+def policy_kwargs(cfg: dict) -> dict:
+    """SB3 policy kwargs from the config (activation names -> torch classes)."""
+    import torch.nn as nn  # noqa: PLC0415
+
+    pk = dict(cfg.get("policy_kwargs") or {})
+    if "activation_fn" in pk:
+        pk["activation_fn"] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU, "leaky_relu": nn.LeakyReLU}[pk["activation_fn"]]
+    return pk
+
+
+def algo_kwargs(cfg: dict) -> dict:
+    """The algorithm's constructor keywords of a config (everything but the META_KEYS)."""
+    return {k: v for k, v in cfg.items() if k not in META_KEYS}
+
+
+def rollout_steps(cfg: dict, algo: str) -> int:
+    """Environment steps SB3 collects per unit of training: n_envs x n_steps (PPO), n_envs (SAC)."""
+    if algo == "ppo":
+        return int(cfg["n_envs"]) * int(cfg.get("n_steps", 2048))  # 2048: PPO's own default
+    return int(cfg["n_envs"])
+
+
+def check_budget(cfg: dict, algo: str, where: str = "n_timesteps") -> int:
+    """``ConfigError`` if ``n_timesteps`` is below one rollout (SB3 would silently train a whole rollout);
+    a warning if it is not a multiple of one (SB3 rounds up). Returns the steps that will be trained."""
+    unit = rollout_steps(cfg, algo)
+    n = int(cfg["n_timesteps"])
+    how = (f"n_envs {cfg['n_envs']} x n_steps {cfg.get('n_steps', 2048)}" if algo == "ppo"
+           else f"n_envs {cfg['n_envs']}")
+    if n < unit:
+        raise ConfigError(f"{where} = {n} is less than one {algo.upper()} rollout ({how} = {unit} steps), which "
+                          f"SB3 would train anyway; give at least {unit}, or lower n_envs/n_steps in the config")
+    trained = -(-n // unit) * unit
+    if trained != n:
+        warnings.warn(f"{where} = {n} is not a multiple of the {unit}-step rollout ({how}); SB3 trains {trained} "
+                      "steps", stacklevel=3)
+    return trained

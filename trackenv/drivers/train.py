@@ -1,0 +1,213 @@
+"""Training of the Stable-Baselines3 drivers.
+
+    trackenv train j_turn --terrain dry_sand --algo ppo --seed 0          # configs/train/ppo.yaml
+    trackenv train JTurn-v0 --terrain asphalt --algo sac --timesteps 20000 --out out/train/jt
+    trackenv train j_turn --terrain dry_sand --algo ppo --resume          # from the latest checkpoint
+
+    from trackenv.drivers import load_config, train, load_policy
+    cfg = load_config("ppo", "j_turn")                 # validated dict (RL Zoo style, trackenv.drivers.config)
+    result = train("j_turn", "dry_sand", "ppo", seed=0, out_dir="out/train/jt")
+    model = load_policy(result.model_path, "j_turn", "dry_sand")   # warns: SB3 zips are pickles
+
+Training runs on :class:`~trackenv.envs.vector.SB3VecEnv` (actions normalised to [-1, 1] times the
+vehicle's voltage limit) wrapped in ``VecMonitor`` and a step timer that measures the share of wall
+time spent stepping the environment (:mod:`trackenv.drivers.wrappers`). Outputs of a run (``out_dir``):
+
+- ``<EnvName>-<terrain>.zip``: the final policy (SB3 zip);
+- ``<EnvName>-<terrain>.json``: task, terrain, algorithm, seed, the resolved config, timesteps, wall
+  time [s], time in env.step / env.reset [s], the command that reproduces it, library versions; paths
+  inside the repository are written relative to it;
+- ``checkpoints/``: ``rl_model_<steps>_steps.zip`` every ``checkpoint_freq`` steps (``--resume``
+  continues from the latest one, the step counter included);
+- ``tb/``: TensorBoard logs (when ``tensorboard`` is installed).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..envs.tasks import task_class
+from ..params import ConfigError
+from .config import (
+    ROOT,
+    algo_class,
+    algo_kwargs,
+    check_budget,
+    config_path,
+    driver_name,
+    load_config,
+    policy_kwargs,
+    repo_relative,
+    resolve_algo,
+    resolve_task,
+    resolve_terrain,
+)
+from .policy import load_policy
+from .wrappers import ErrorPenalty, ResidualVecEnv, StepTimer
+
+
+def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None = None, seed: int | None = None,
+                 residual: dict | None = None, error_weight: float = 0.0):
+    """The SB3 training env: ``SB3VecEnv`` (normalised actions) in a step timer and ``VecMonitor``;
+    with ``residual`` (``{"scale": r, "gains": {...}}``) the policy's action is added to the classical
+    controller's (:class:`~trackenv.drivers.wrappers.ResidualVecEnv`); with ``error_weight`` > 0 the
+    reward is shaped on the task's primary tracking error (:class:`~trackenv.drivers.wrappers.ErrorPenalty`)."""
+    from stable_baselines3.common.vec_env import VecMonitor  # noqa: PLC0415
+
+    from ..envs.vector import SB3VecEnv  # noqa: PLC0415
+
+    venv = SB3VecEnv(task=resolve_task(task), num_envs=int(n_envs), normalize_action=True, terrain=terrain,
+                     **(env_kwargs or {}))
+    timer = StepTimer(venv)
+    inner = ResidualVecEnv(timer, residual["scale"], residual["gains"]) if residual else timer
+    mon = VecMonitor(inner, info_keywords=("is_success", "tracking_rmse"))
+    if error_weight > 0:
+        pe = task_class(task).primary_error  # its TaskEval.error (the RMSE metric) and its kernel scale
+        mon = ErrorPenalty(mon, venv.venv.obs_names.index(pe.obs_name), pe.scale, error_weight)
+    if seed is not None:
+        mon.seed(int(seed))
+    return mon, timer
+
+
+@dataclass
+class TrainResult:
+    """What :func:`train` wrote: the policy zip, its JSON record, and the record's content."""
+
+    model_path: Path
+    info_path: Path
+    info: dict
+
+
+def latest_checkpoint(run_dir: str | Path) -> Path | None:
+    """The checkpoint with the most steps in ``run_dir/checkpoints`` (None if there is none)."""
+    ck = Path(run_dir) / "checkpoints"
+    best, best_steps = None, -1
+    for p in ck.glob("rl_model_*_steps.zip") if ck.is_dir() else ():
+        m = re.fullmatch(r"rl_model_(\d+)_steps\.zip", p.name)
+        if m and int(m.group(1)) > best_steps:
+            best, best_steps = p, int(m.group(1))
+    return best
+
+
+def _versions() -> dict:
+    import jax  # noqa: PLC0415
+    import stable_baselines3  # noqa: PLC0415
+    import torch  # noqa: PLC0415
+
+    return {"stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__, "jax": jax.__version__,
+            "python": sys.version.split()[0]}
+
+
+def _optional_outputs(run: Path, tensorboard: bool, progress_bar: bool) -> tuple[str | None, bool]:
+    """The TensorBoard folder (None without tensorboard) and whether a progress bar can be shown."""
+    tb = None
+    if tensorboard:
+        try:
+            import tensorboard as _tb  # noqa: F401,PLC0415
+
+            tb = str(run / "tb")
+        except ImportError:
+            warnings.warn("tensorboard is not installed: no TensorBoard logs", stacklevel=3)
+    if progress_bar:
+        try:
+            import rich  # noqa: F401,PLC0415
+            import tqdm  # noqa: F401,PLC0415
+        except ImportError:
+            warnings.warn("tqdm/rich not installed: no progress bar", stacklevel=3)
+            progress_bar = False
+    return tb, progress_bar
+
+
+def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: str | Path | dict | None = None,
+          seed: int = 0, timesteps: int | None = None, out_dir: str | Path | None = None,
+          run_dir: str | Path | None = None, resume: bool = False,
+          progress_bar: bool = True, tensorboard: bool = True, verbose: int = 0, threads: int = 1,
+          command: str | None = None) -> TrainResult:
+    """Train a driver and save ``<out_dir>/<EnvName>-<terrain>.zip`` plus its ``.json`` record.
+
+    Everything is validated (task, terrain, algorithm, config keys and values) before an environment
+    is built. ``timesteps`` overrides the config's ``n_timesteps``; ``resume`` continues from the
+    latest checkpoint in ``run_dir/checkpoints`` (the step count continues; the config must be the
+    same). ``run_dir`` (default ``out_dir``) holds the checkpoints and TensorBoard logs. ``threads``: torch
+    threads (1 on a 2-core machine: the env runs in JAX's own threads).
+    """
+    task = resolve_task(task)
+    terrain = resolve_terrain(terrain)
+    algo = resolve_algo(algo)
+    cfg = load_config(algo, task, terrain, config)
+    if timesteps is not None:
+        if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < 1:
+            raise ConfigError(f"timesteps must be a positive integer, got {timesteps!r}")
+        cfg["n_timesteps"] = int(timesteps)
+    check_budget(cfg, algo, where="--timesteps" if timesteps is not None else "n_timesteps")
+    name = driver_name(task, terrain)
+    out = Path(out_dir) if out_dir is not None else ROOT / "out" / "train" / f"{name}-{algo}-s{seed}"
+    run = Path(run_dir) if run_dir is not None else out
+    ckpt = latest_checkpoint(run) if resume else None
+    if resume and ckpt is None:
+        raise ConfigError(f"--resume: no checkpoint in {run / 'checkpoints'}")
+
+    import torch  # noqa: PLC0415
+    from stable_baselines3.common.callbacks import CheckpointCallback  # noqa: PLC0415
+
+    torch.set_num_threads(int(threads))
+    out.mkdir(parents=True, exist_ok=True)
+    run.mkdir(parents=True, exist_ok=True)
+    driver_meta = {"task": task, "terrain": terrain, "residual": cfg["residual"]}
+    if cfg["residual"] > 0:
+        from ..envs.controllers import load_gains  # noqa: PLC0415
+
+        driver_meta["gains"] = load_gains(task, terrain)
+    residual = {"scale": cfg["residual"], "gains": driver_meta["gains"]} if cfg["residual"] > 0 else None
+    venv, timer = make_vec_env(task, terrain, cfg["n_envs"], cfg["env_kwargs"], seed, residual, cfg["error_weight"])
+    tb, progress_bar = _optional_outputs(run, tensorboard, progress_bar)
+    previous = {}
+    if ckpt is not None:
+        model = load_policy(ckpt, task, terrain, env=venv, algo=algo, warn=False)
+        model.tensorboard_log = tb
+        info_path = run / "progress.json"
+        if info_path.is_file():
+            previous = json.loads(info_path.read_text())
+    else:
+        model = algo_class(algo)(cfg["policy"], venv, policy_kwargs=policy_kwargs(cfg), seed=int(seed), device="cpu",
+                                 tensorboard_log=tb, verbose=verbose, **algo_kwargs(cfg))
+    done_before = int(model.num_timesteps)
+    remaining = max(0, cfg["n_timesteps"] - done_before)
+    callback = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
+                                  save_path=str(run / "checkpoints"), name_prefix="rl_model")
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=remaining, callback=callback, progress_bar=progress_bar, tb_log_name=name,
+                reset_num_timesteps=ckpt is None)
+    wall = time.perf_counter() - t0
+    model_path = out / f"{name}.zip"
+    model.trackenv_driver = driver_meta  # saved in the zip's data; read back by trackenv.drivers.policy.Learned
+    model.save(str(model_path))
+    ep = list(model.ep_info_buffer)
+    env_name = task_class(task).env_name
+    info = {
+        "driver": name, "task": task, "env_id": task_class(task).env_id, "terrain": terrain, "algo": algo,
+        "seed": int(seed), "config": cfg,
+        "config_file": None if isinstance(config, dict) else repo_relative(config_path(algo, config)),
+        "n_timesteps": int(model.num_timesteps),
+        "train_seconds": wall + float(previous.get("train_seconds", 0.0)),
+        "env_step_seconds": timer.step_seconds + timer.reset_seconds + float(previous.get("env_step_seconds", 0.0)),
+        "resumed_from": repo_relative(ckpt) if ckpt else None, "driver_meta": driver_meta,
+        "final_mean_return": float(np.mean([e["r"] for e in ep])) if ep else None,
+        "final_success_rate": float(np.mean([e.get("is_success", 0.0) for e in ep])) if ep else None,
+        "command": command or f"trackenv train {env_name} --terrain {terrain} --algo {algo} --seed {seed}",
+        "versions": _versions(), "model_bytes": model_path.stat().st_size,
+    }
+    info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)
+    info_path = out / f"{name}.json"
+    info_path.write_text(json.dumps(info, indent=2) + "\n")
+    (run / "progress.json").write_text(json.dumps(info, indent=2) + "\n")
+    venv.close()
+    return TrainResult(model_path, info_path, info)
