@@ -72,6 +72,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..effects.base import Effect
+from ..envs.tasks import MANEUVERS as TASK_MANEUVERS
 
 __all__ = [
     "BLIND_EFFECTS",
@@ -501,7 +502,7 @@ BLIND_EFFECTS: dict[str, type[Effect]] = {
 }
 CANONICAL_IDS: tuple[str, ...] = tuple(BLIND_EFFECTS)
 LABELS: tuple[str, ...] = CANONICAL_IDS + ("none",)
-MANEUVERS = ("go_stop", "j_turn", "lane_change", "zero_radius_turn", "random_steer", "step_steer", "accel_steps")
+MANEUVERS = (*TASK_MANEUVERS, "random_steer", "step_steer", "accel_steps")  # the tasks' maneuvers and three more shapes
 TURNING = ("j_turn", "lane_change", "zero_radius_turn", "random_steer", "step_steer")
 DEFORMABLE_TERRAINS = ("dry_sand", "dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")
 HARD_TERRAINS = ("asphalt",)

@@ -364,7 +364,8 @@ def load_evidence(path: Path) -> dict:
 def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: list[str] | None = None,
              internal_resistance: str = "constant", candidates: list[str] | None = None, substep: float = FIT_SUBSTEP,
              seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
-             progress: bool = True, pad_s: float | None = None, cache: str | Path | None = None) -> Diagnosis:
+             progress: bool = True, pad_s: float | None = None, cache: str | Path | None = None,
+             jacobian: str = "secant") -> Diagnosis:
     """Diagnose the gap between the simulator and the field tests in ``folder`` (one sub-folder per test).
 
     Args:
@@ -378,12 +379,18 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             iterations per fit (0: derivative-free search only). alpha: significance level of the rule.
         pad_s: pad every test to this duration [s] in one batch (fixed shapes across diagnoses, :mod:`.batch`).
         cache: a folder to write the verdict's evidence to (:func:`save_evidence`).
+        jacobian: the polish's Jacobian, ``"secant"`` (central differences, batched) or ``"forward"``
+            (``jax.jacfwd``); see :mod:`.polish`.
         figures: draw the PNGs. progress: show a progress bar on stderr.
 
     Raises:
         DiagnosisError: nothing usable in ``folder``, or a bad option.
     """
     t_start = time.perf_counter()
+    from .polish import JACOBIANS
+
+    if jacobian not in JACOBIANS:
+        raise DiagnosisError(f"jacobian must be one of {', '.join(JACOBIANS)}, got {jacobian!r}")
     if internal_resistance not in ("constant", "viscous"):
         raise DiagnosisError(f"internal_resistance must be 'constant' or 'viscous', got {internal_resistance!r}")
     data, excluded = load_tests(folder, tests)
@@ -424,7 +431,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         bar.set_postfix_str(c.name)
         t0 = time.perf_counter()
         fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
-                                     polish_iters=polish_iters,
+                                     polish_iters=polish_iters, jacobian=jacobian,
                                      progress=bar.update)
         t_fit[c.name] = time.perf_counter() - t0
     bar.close()
@@ -515,7 +522,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "rule": RULE_TEXT,
             "thresholds": {"alpha": alpha, "bonferroni_m": rule["m"], "min_shrink": MIN_SHRINK},
             "search": f"Latin hypercube + {rounds} cross-entropy rounds per fold, then Levenberg-Marquardt "
-                      f"({polish_iters} iterations at most, jax.jacfwd Jacobian); seed {seed}",
+                      f"({polish_iters} iterations at most, {jacobian} Jacobian); seed {seed}",
         },
         "timing": {"wall_s": time.perf_counter() - t_start, "fit_s": t_fit,
                    "vehicle_seconds_simulated": sim.n_vehicle_seconds},

@@ -218,7 +218,8 @@ def _losses(tests, pred):
 
 
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
-                  min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None) -> CandidateFit:
+                  min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None,
+                  jacobian: str = "secant") -> CandidateFit:
     tests = sim.tests
     n = len(tests)
     fold_defs = list(folds) + [full_fold(tests)]  # last = full fit
@@ -284,7 +285,8 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     if p and polish_iters > 0:
         from .polish import polish_folds
 
-        res = polish_folds(sim, cand, fold_defs, units, wins, scores, iters=polish_iters, progress=progress)
+        res = polish_folds(sim, cand, fold_defs, units, wins, scores, iters=polish_iters, progress=progress,
+                           jacobian=jacobian)
         n_sims += res["n_simulations"]
         for f in range(F):
             polish_info[f] = res["info"][f]
