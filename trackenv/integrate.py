@@ -178,6 +178,18 @@ def advance(
     """Advance ``state`` over ``volts.shape[0]`` substeps of length ``h``.
 
     ``volts``: (n_substeps, 3, 2, *b), the voltages at each substep's start, middle and end.
+
+    **Arguments:**
+
+    - `state`: the vehicle state at the start (SI).
+    - `volts`: motor voltages [V], shape (n, 3, 2, *b): substep, (start, middle, end), track.
+    - `params`: the model parameters.
+    - `h`: the substep length [s].
+    - `unroll`: ``jax.lax.scan``'s unroll factor (compile time vs run time; no effect on the result).
+
+    **Returns:**
+
+    The state after n substeps, a time n h [s] later.
     """
     cur = current_coeffs(params, h)
 
@@ -203,6 +215,22 @@ def advance_constant(
     If ``integrand`` (a function of the state, e.g. the supply power) is given, also return its
     trapezoid-rule integral over the substeps, starting from ``integrand_start`` (default: its value at
     ``state``): ``(state, integral)``.
+
+    **Arguments:**
+
+    - `state`: the vehicle state at the start (SI).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b), held over the step.
+    - `params`: the model parameters.
+    - `dt`: the control step [s].
+    - `substeps`: the number of ETDRK4 substeps, each ``dt / substeps`` long.
+    - `unroll`: ``jax.lax.fori_loop``'s unroll factor (no effect on the result).
+    - `integrand`: optional function of the state (e.g. the supply power [W]).
+    - `integrand_start`: its value at the start; default ``integrand(state)``.
+
+    **Returns:**
+
+    The state a time ``dt`` later; with ``integrand``, ``(state, integral)``, the integral in the
+    integrand's unit times seconds (e.g. J for a power).
     """
     h = dt / substeps
     cur = current_coeffs(params, h)

@@ -50,7 +50,19 @@ def initial_state(
     pose: Float[ArrayLike, " 3"] | Sequence[float] | None = None,
     vel: Float[ArrayLike, " 3"] | Sequence[float] | None = None,
 ) -> State:
-    """Vehicle at rest (or at the given pose/velocity), zero current and shear displacement."""
+    """Vehicle at rest (or at the given pose/velocity), zero current and shear displacement.
+
+    **Arguments:**
+
+    - `params`: the model parameters (their ``dtype`` is the state's).
+    - `batch_shape`: the trailing batch shape ``*b`` (``()``: one vehicle).
+    - `pose`: X [m], Y [m], psi [rad], the same for every vehicle of the batch; default zero.
+    - `vel`: u, v [m/s], r [rad/s] (body frame), the same for every vehicle; default zero.
+
+    **Returns:**
+
+    The :class:`State`; effects add their initial states under ``extra``.
+    """
     dtype = params.dtype
     n = params.vehicle.n_contact
     z = lambda *s: jnp.zeros(s + tuple(batch_shape), dtype)  # noqa: E731
@@ -91,7 +103,20 @@ class Evaluation(NamedTuple):
 
 
 def evaluate(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> Evaluation:
-    """Evaluate forces and the non-stiff part of the state derivative at one instant."""
+    """Evaluate forces and the non-stiff part of the state derivative at one instant.
+
+    **Arguments:**
+
+    - `state`: the vehicle state (SI, shapes as in :class:`State`).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b).
+    - `params`: the model parameters (vehicle, terrain, internal resistance, effects).
+
+    **Returns:**
+
+    An :class:`Evaluation`: the drive terms N(x) (full derivative of the non-stiff states, drive term
+    of the stiff ones, in state units per second), the kinematics, the contact forces [N] and the back
+    and internal torques [N m].
+    """
     veh, ter = params.vehicle, params.terrain
     nb = state.vel.ndim - 1
     kin = contact.kinematics(veh, ter, state.vel, state.omega, nb)
@@ -149,7 +174,19 @@ def decay_rates(
 
 
 def derivative(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> State:
-    """The full state derivative dx/dt (for reference solvers and checks)."""
+    """The full state derivative dx/dt (for reference solvers and checks).
+
+    **Arguments:**
+
+    - `state`: the vehicle state (SI).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b).
+    - `params`: the model parameters.
+
+    **Returns:**
+
+    dx/dt as a :class:`State` of rates: [m/s, m/s, rad/s], [m/s^2, m/s^2, rad/s^2], [rad/s^2], [A/s],
+    [m/s], [m/s] (and the effects' rates under ``extra``).
+    """
     ev = evaluate(state, voltage, params)
     lam_i, lam_z, lam_x = decay_rates(params, ev.kin, ev.kin.belt_speed)
     d = ev.drive
@@ -177,7 +214,18 @@ class PowerBalance(NamedTuple):
 
 
 def power_balance(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> PowerBalance:
-    """Power flows of the base model; d(stored)/dt = electrical - all losses (energy balance)."""
+    """Power flows of the base model; d(stored)/dt = electrical - all losses (energy balance).
+
+    **Arguments:**
+
+    - `state`: the vehicle state (SI).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b).
+    - `params`: the model parameters.
+
+    **Returns:**
+
+    A :class:`PowerBalance`: each flow [W] and the stored energy [J], shape (*b).
+    """
     veh = params.vehicle
     ev = evaluate(state, voltage, params)
     f, kin = ev.forces, ev.kin
