@@ -18,20 +18,23 @@ J. Comput. Phys. 176 (2002) 430-455; phi-function form after Hochbruck & Osterma
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .params import Params
 from .physics import contact
-from .physics.model import State, decay_rates, evaluate
+from .physics.model import Evaluation, State, decay_rates, evaluate
 from .physics.motor import current_decay_rate, resistance_slope
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series
 _TAYLOR_TERMS = 12
 
 
-def phi_functions(z):
+def phi_functions(z: Float[Array, " *s"]) -> tuple[Float[Array, " *s"], Float[Array, " *s"], Float[Array, " *s"]]:
     """phi_1, phi_2, phi_3 of z = -h lambda <= 0, accurate for every z (Taylor series near 0).
 
     phi_k(z) = sum_j z^j / (j + k)!; directly: phi_1 = (e^z - 1)/z, phi_2 = (e^z - 1 - z)/z^2,
@@ -55,7 +58,7 @@ def phi_functions(z):
     return phi1, phi2, phi3
 
 
-def phi1(z):
+def phi1(z: Float[Array, " *s"]) -> Float[Array, " *s"]:
     """phi_1(z) = (e^z - 1)/z, accurate near 0."""
     small = jnp.abs(z) < 1e-3
     zl = jnp.where(small, -1.0, z)
@@ -73,7 +76,7 @@ class Coeffs(NamedTuple):
     f3: object  # h (4 phi3 - phi2)
 
 
-def etd_coeffs(rate, h) -> Coeffs:
+def etd_coeffs(rate: Float[Array, " *s"], h: Float[ArrayLike, ""]) -> Coeffs:
     """ETDRK4 coefficients for decay ``rate`` (lambda >= 0) over a step ``h``."""
     z = -h * rate
     e2 = jnp.exp(0.5 * z)
@@ -81,7 +84,7 @@ def etd_coeffs(rate, h) -> Coeffs:
     return Coeffs(e2 * e2, e2, 0.5 * h * phi1(0.5 * z), h * (p1 - 3.0 * p2 + 4.0 * p3), h * (p2 - 2.0 * p3), h * (4.0 * p3 - p2))
 
 
-def rk4_coeffs(h) -> Coeffs:
+def rk4_coeffs(h: Float[ArrayLike, ""]) -> Coeffs:
     """Classical RK4 as the lambda = 0 limit of ETDRK4."""
     return Coeffs(1.0, 1.0, 0.5 * h, h / 6.0, h / 6.0, h / 6.0)
 
@@ -99,7 +102,9 @@ def _map(fn, coeffs: State, *trees: State) -> State:
     return jax.tree.map(fn, coeffs, *trees, is_leaf=_is_coeffs)
 
 
-def diagonal_damping(params, state: State, ev):
+def diagonal_damping(
+    params: Params, state: State, ev: Evaluation
+) -> tuple[Float[Array, " 2 *b"], Float[Array, " 3 *b"]]:
     """Frozen diagonal Jacobian -df/dx of the sprocket speeds and body velocities (clamped >= 0).
 
     Near zero slip the saturation of j_z (3.17) and j_x (3.33) makes the contact forces very steep
@@ -128,7 +133,9 @@ def diagonal_damping(params, state: State, ev):
     return jnp.maximum(lam_w, 0.0), jnp.maximum(lam_vel, 0.0)
 
 
-def etdrk4_substep(state: State, volts3, params, h, current: Coeffs) -> State:
+def etdrk4_substep(
+    state: State, volts3: Float[Array, " 3 2 *b"], params: Params, h: Float[ArrayLike, ""], current: Coeffs
+) -> State:
     """One ETDRK4 substep of length ``h`` [s]; ``volts3`` (3, 2, *b) holds V at t, t+h/2, t+h."""
     ev = evaluate(state, volts3[0], params)
     omega_mid = state.omega + 0.5 * h * ev.drive.omega
@@ -160,15 +167,29 @@ def etdrk4_substep(state: State, volts3, params, h, current: Coeffs) -> State:
     )
 
 
-def current_coeffs(params, h) -> Coeffs:
+def current_coeffs(params: Params, h: Float[ArrayLike, ""]) -> Coeffs:
     """ETDRK4 coefficients of the motor circuit (constant rate R_m/L_m), once per call."""
     return etd_coeffs(current_decay_rate(params.vehicle), h)
 
 
-def advance(state: State, volts, params, h, unroll: int = 1) -> State:
+def advance(
+    state: State, volts: Float[Array, " n 3 2 *b"], params: Params, h: Float[ArrayLike, ""], unroll: int = 1
+) -> State:
     """Advance ``state`` over ``volts.shape[0]`` substeps of length ``h``.
 
     ``volts``: (n_substeps, 3, 2, *b), the voltages at each substep's start, middle and end.
+
+    **Arguments:**
+
+    - `state`: the vehicle state at the start (SI).
+    - `volts`: motor voltages [V], shape (n, 3, 2, *b): substep, (start, middle, end), track.
+    - `params`: the model parameters.
+    - `h`: the substep length [s].
+    - `unroll`: ``jax.lax.scan``'s unroll factor (compile time vs run time; no effect on the result).
+
+    **Returns:**
+
+    The state after n substeps, a time n h [s] later.
     """
     cur = current_coeffs(params, h)
 
@@ -179,13 +200,37 @@ def advance(state: State, volts, params, h, unroll: int = 1) -> State:
     return state
 
 
-def advance_constant(state: State, voltage, params, dt, substeps: int, unroll: int = 1,
-                     integrand=None, integrand_start=None):
+def advance_constant(
+    state: State,
+    voltage: Float[Array, " 2 *b"],
+    params: Params,
+    dt: Float[ArrayLike, ""],
+    substeps: int,
+    unroll: int = 1,
+    integrand: Callable[[State], Float[Array, " *s"]] | None = None,
+    integrand_start: Float[Array, " *s"] | None = None,
+) -> State | tuple[State, Float[Array, " *s"]]:
     """Advance ``state`` by one control step ``dt`` with the voltage (2, *b) held constant.
 
     If ``integrand`` (a function of the state, e.g. the supply power) is given, also return its
     trapezoid-rule integral over the substeps, starting from ``integrand_start`` (default: its value at
     ``state``): ``(state, integral)``.
+
+    **Arguments:**
+
+    - `state`: the vehicle state at the start (SI).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b), held over the step.
+    - `params`: the model parameters.
+    - `dt`: the control step [s].
+    - `substeps`: the number of ETDRK4 substeps, each ``dt / substeps`` long.
+    - `unroll`: ``jax.lax.fori_loop``'s unroll factor (no effect on the result).
+    - `integrand`: optional function of the state (e.g. the supply power [W]).
+    - `integrand_start`: its value at the start; default ``integrand(state)``.
+
+    **Returns:**
+
+    The state a time ``dt`` later; with ``integrand``, ``(state, integral)``, the integral in the
+    integrand's unit times seconds (e.g. J for a power).
     """
     h = dt / substeps
     cur = current_coeffs(params, h)
@@ -211,7 +256,7 @@ def advance_constant(state: State, voltage, params, dt, substeps: int, unroll: i
 BOUND_FACTOR = 10.0
 
 
-def physical_bounds(params):
+def physical_bounds(params: Params) -> tuple[Float[Array, " *#b"], Float[Array, " *#b"]]:
     """Largest physical |current| [A] and |omega| [rad/s]: ``BOUND_FACTOR`` x the stall current
     V_lim/R_m (4.2 at omega = 0) and the no-load speed V_lim/alpha_v (4.2 at i = 0)."""
     veh = params.vehicle
@@ -219,7 +264,7 @@ def physical_bounds(params):
             BOUND_FACTOR * veh.voltage_limit / veh.alpha_v)
 
 
-def is_physical(state: State, params, nb: int):
+def is_physical(state: State, params: Params, nb: int) -> Bool[Array, " *b"]:
     """Per-vehicle flag, shape (*b): every component is finite and the motor currents and sprocket
     speeds are within :func:`physical_bounds`."""
     i_max, w_max = physical_bounds(params)
@@ -228,7 +273,7 @@ def is_physical(state: State, params, nb: int):
     return is_finite(state, nb) & bounded
 
 
-def is_finite(state: State, nb: int):
+def is_finite(state: State, nb: int) -> Bool[Array, " *b"]:
     """Per-vehicle flag: every state component is finite; shape (*b)."""
     leaves = jax.tree.leaves(state)
     flags = [jnp.isfinite(x).all(axis=tuple(range(x.ndim - nb))) for x in leaves]

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
+from ..params import Terrain, Vehicle
 from . import terramechanics as tm
 from .geometry import belt_radius, contact_area, contact_x, track_y
 
@@ -18,7 +19,7 @@ LEADING_EDGE_SPEED = 1e-2  # m/s, Delta V_z: below it the leading edge follows t
 MIN_Z_STAR = 1e-6  # m, Delta Z: floor of z* in the decay rate |V_t|/z*
 SLIP_SAT_START, SLIP_SAT_END = 1e-3, 1.5e-2  # m/s, saturation of j_z (3.17)
 LATERAL_SAT_START, LATERAL_SAT_END = 5e-4, 5e-3  # m/s, saturation of j_x (3.33)
-LONG_FORCE_SMOOTHING = 1e-9  # m, sign smoothing of the longitudinal force in j'_z (3.20)
+LONG_FORCE_SMOOTHING = 1e-9  # m, sign smoothing of the longitudinal force in j'_z (3.23)
 LAT_FORCE_SMOOTHING = 3e-2  # m, sign smoothing of the lateral force in j'_x (3.36)
 COMPACTION_SPEED_SMOOTHING = 0.2  # m/s, sign smoothing of R_c in the track's ground speed
 
@@ -26,20 +27,22 @@ COMPACTION_SPEED_SMOOTHING = 0.2  # m/s, sign smoothing of R_c in the track's gr
 class Kinematics(NamedTuple):
     """Contact kinematics of both tracks at one instant (SI)."""
 
-    belt_radius: jax.Array  # m, r_s' (scalar or (*b))
-    belt_speed: jax.Array  # m/s, V_t = r_s' omega, (2, *b)
-    ground_speed: jax.Array  # m/s, u - r y_k, (2, *b)
-    slip: jax.Array  # m/s, s_k = V_t - (u - r y_k), (2, *b)
-    lateral_velocity: jax.Array  # m/s, v + r x_i, (1, N, *b)
-    z_star: jax.Array  # m, distance from the leading edge, (2, N, *b)
-    z_tilde: jax.Array  # m, distance from the leading edge or from z-bar, (2, N, *b)
-    x: jax.Array  # m, contact x, (1, N, *b)
-    y: jax.Array  # m, track centreline y, (2, *b)
-    area: jax.Array  # m^2, element areas, (1, N, *b)
+    belt_radius: Float[Array, " *#b"]  # m, r_s' (scalar or (*b))
+    belt_speed: Float[Array, " 2 *b"]  # m/s, V_t = r_s' omega, (2, *b)
+    ground_speed: Float[Array, " 2 *b"]  # m/s, u - r y_k, (2, *b)
+    slip: Float[Array, " 2 *b"]  # m/s, s_k = V_t - (u - r y_k), (2, *b)
+    lateral_velocity: Float[Array, " 1 N *b"]  # m/s, v + r x_i, (1, N, *b)
+    z_star: Float[Array, " 2 N *b"]  # m, distance from the leading edge, (2, N, *b)
+    z_tilde: Float[Array, " 2 N *b"]  # m, distance from the leading edge or from z-bar, (2, N, *b)
+    x: Float[Array, " 1 N *#b"]  # m, contact x, (1, N, *b)
+    y: Float[Array, " 2 *#b"]  # m, track centreline y, (2, *b)
+    area: Float[Array, " 1 N *#b"]  # m^2, element areas, (1, N, *b)
 
 
-def kinematics(vehicle, terrain, vel, omega, nb: int) -> Kinematics:
-    """Contact-point velocities, slip, and the z*/z-tilde coordinates (docs/model.md §3, §3.4.2.2, 3.28-3.32)."""
+def kinematics(
+    vehicle: Vehicle, terrain: Terrain, vel: Float[Array, " 3 *b"], omega: Float[Array, " 2 *b"], nb: int
+) -> Kinematics:
+    """Contact-point velocities, slip, and the z*/z-tilde coordinates (docs/model.md §3, §3.4.2.2, 3.29-3.31)."""
     u, v, r = vel[0], vel[1], vel[2]
     x = contact_x(vehicle, nb)
     y = track_y(vehicle, nb)
@@ -60,7 +63,7 @@ def kinematics(vehicle, terrain, vel, omega, nb: int) -> Kinematics:
     z_from_rear = x + half
     z_star = jnp.where(front[:, None], z_from_front, z_from_rear)
 
-    # z-bar: where the lateral velocity changes sign along the track (3.28-3.29).
+    # z-bar: where the lateral velocity changes sign along the track (3.29), (3.30).
     vy_front = v + r * half
     vy_rear = v - r * half
     v_first = jnp.where(front, vy_front, vy_rear)  # (2, *b)
@@ -69,18 +72,21 @@ def kinematics(vehicle, terrain, vel, omega, nb: int) -> Kinematics:
     denom = jnp.where(changes_sign, v_first - v_last, 1.0)
     z_bar = jnp.where(changes_sign, v_first / denom * vehicle.contact_length, jnp.inf)
     past = z_star >= z_bar[:, None]
-    z_tilde = jnp.where(past, z_star - z_bar[:, None], z_star)  # (3.30)
+    z_tilde = jnp.where(past, z_star - z_bar[:, None], z_star)  # (3.31)
     return Kinematics(rb, belt_speed, ground_speed, slip, vy, z_star, z_tilde, x, y, contact_area(vehicle, nb))
 
 
-def shear_decay_rates(belt_speed, kin: Kinematics):
-    """Linear decay rates |V_t|/max(z*, Delta Z) of j_z (3.14) and j_x (3.31) [1/s], each (2, N, *b)."""
+def shear_decay_rates(
+    belt_speed: Float[Array, " 2 *b"],
+    kin: Kinematics,
+) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
+    """Linear decay rates |V_t|/max(z*, Delta Z) of j_z (3.14) and j_x (3.32) [1/s], each (2, N, *b)."""
     speed = jnp.abs(belt_speed)[:, None]
     return speed / jnp.maximum(kin.z_star, MIN_Z_STAR), speed / jnp.maximum(kin.z_tilde, MIN_Z_STAR)
 
 
-def shear_drive(kin: Kinematics):
-    """Non-stiff parts of the shear-displacement ODEs: d j_z/dt <- s_k (3.14), d j_x/dt <- v_y (3.31) [m/s]."""
+def shear_drive(kin: Kinematics) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
+    """Non-stiff parts of the shear-displacement ODEs: d j_z/dt <- s_k (3.14), d j_x/dt <- v_y (3.32) [m/s]."""
     jz_drive = jnp.broadcast_to(kin.slip[:, None], kin.z_star.shape)
     jx_drive = jnp.broadcast_to(kin.lateral_velocity, kin.z_star.shape)
     return jz_drive, jx_drive
@@ -89,34 +95,40 @@ def shear_drive(kin: Kinematics):
 class ContactForces(NamedTuple):
     """Forces of the ground on the vehicle (SI). Effects may replace or add to any field."""
 
-    normal: jax.Array  # N, F_n,i, (2, N, *b)
-    longitudinal: jax.Array  # N, along body +x at each element, (2, N, *b)
-    lateral: jax.Array  # N, along body +y at each element, (2, N, *b)
-    compaction: jax.Array  # N, compaction resistance along body +x per track (signed), (2, *b)
-    body_x: jax.Array  # N, extra body force along +x (effects), (*b)
-    body_y: jax.Array  # N, extra body force along +y (effects), (*b)
-    body_yaw: jax.Array  # N m, extra yaw moment (effects), (*b)
-    sprocket: jax.Array  # N m, extra resisting torque at each sprocket (effects), (2, *b)
+    normal: Float[Array, " 2 N *b"]  # N, F_n,i, (2, N, *b)
+    longitudinal: Float[Array, " 2 N *b"]  # N, along body +x at each element, (2, N, *b)
+    lateral: Float[Array, " 2 N *b"]  # N, along body +y at each element, (2, N, *b)
+    compaction: Float[Array, " 2 *b"]  # N, compaction resistance along body +x per track (signed), (2, *b)
+    body_x: Float[Array, " *b"]  # N, extra body force along +x (effects), (*b)
+    body_y: Float[Array, " *b"]  # N, extra body force along +y (effects), (*b)
+    body_yaw: Float[Array, " *b"]  # N m, extra yaw moment (effects), (*b)
+    sprocket: Float[Array, " 2 *b"]  # N m, extra resisting torque at each sprocket (effects), (2, *b)
 
 
-def saturations(kin: Kinematics):
+def saturations(kin: Kinematics) -> tuple[Float[Array, " 2 1 *b"], Float[Array, " 1 N *b"]]:
     """Saturation factors of the shear displacements: j'_z = j_z S_z(|s|) (3.17), j'_x = j_x S_x(|v_y|) (3.33)."""
     sat_z = tm.step5(jnp.abs(kin.slip), SLIP_SAT_START, 0.0, SLIP_SAT_END, 1.0)[:, None]
     sat_x = tm.step5(jnp.abs(kin.lateral_velocity), LATERAL_SAT_START, 0.0, LATERAL_SAT_END, 1.0)
     return sat_z, sat_x
 
 
-def forces_from_saturated(terrain, area, normal, jz_sat, jx_sat):
-    """Longitudinal and lateral element forces [N] from saturated displacements (3.19-3.20, 3.35-3.36)."""
+def forces_from_saturated(
+    terrain: Terrain,
+    area: Float[Array, " 1 N *#b"],
+    normal: Float[Array, " 2 N *b"],
+    jz_sat: Float[Array, " 2 N *b"],
+    jx_sat: Float[Array, " 2 N *b"],
+) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
+    """Longitudinal and lateral element forces [N] from saturated displacements (3.19, 3.23, 3.35-3.36)."""
     pressure = normal / area
     fz = tm.shear_stress(jz_sat, pressure, terrain) * area  # (3.19)
     fx = tm.shear_stress(jx_sat, pressure, terrain) * area  # (3.35)
-    longitudinal = tm.step5(jz_sat, -LONG_FORCE_SMOOTHING, -fz, LONG_FORCE_SMOOTHING, fz)  # (3.20)
+    longitudinal = tm.step5(jz_sat, -LONG_FORCE_SMOOTHING, -fz, LONG_FORCE_SMOOTHING, fz)  # (3.23)
     lateral = tm.step5(jx_sat, -LAT_FORCE_SMOOTHING, fx, LAT_FORCE_SMOOTHING, -fx)  # (3.36)
     return longitudinal, lateral
 
 
-def saturation_slopes(kin: Kinematics):
+def saturation_slopes(kin: Kinematics) -> tuple[Float[Array, " 2 1 *b"], Float[Array, " 1 N *b"]]:
     """dS_z/ds (2, 1, *b) and dS_x/dv_y (1, N, *b) of :func:`saturations` (closed form of 3.17, 3.33)."""
     dz = tm.step5_slope(jnp.abs(kin.slip), SLIP_SAT_START, 0.0, SLIP_SAT_END, 1.0) * jnp.sign(kin.slip)
     dx = tm.step5_slope(jnp.abs(kin.lateral_velocity), LATERAL_SAT_START, 0.0, LATERAL_SAT_END, 1.0) \
@@ -124,10 +136,16 @@ def saturation_slopes(kin: Kinematics):
     return dz[:, None], dx
 
 
-def force_slopes(terrain, area, normal, jz_sat, jx_sat):
+def force_slopes(
+    terrain: Terrain,
+    area: Float[Array, " 1 N *#b"],
+    normal: Float[Array, " 2 N *b"],
+    jz_sat: Float[Array, " 2 N *b"],
+    jx_sat: Float[Array, " 2 N *b"],
+) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
     """d F_long / d j'_z and d F_lat / d j'_x [N/m] of :func:`forces_from_saturated`, elementwise.
 
-    F_long = f_z(|j'_z|) g_a(j'_z) with g_a = smoothsign of width a (3.20), so
+    F_long = f_z(|j'_z|) g_a(j'_z) with g_a = smoothsign of width a (3.23), so
     dF/dj' = A dtau/d|j| sgn(j') g_a + f_z g_a'; likewise F_lat = -f_x g_b(j'_x) (3.36).
     """
     pressure = normal / area
@@ -141,13 +159,24 @@ def force_slopes(terrain, area, normal, jz_sat, jx_sat):
     return d_long, d_lat
 
 
-def shear_forces(terrain, kin: Kinematics, normal, jz, jx):
-    """Longitudinal and lateral shear forces at each element [N] (3.17-3.20, 3.33-3.36)."""
+def shear_forces(
+    terrain: Terrain,
+    kin: Kinematics,
+    normal: Float[Array, " 2 N *b"],
+    jz: Float[Array, " 2 N *b"],
+    jx: Float[Array, " 2 N *b"],
+) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
+    """Longitudinal and lateral shear forces at each element [N] (3.17, 3.19, 3.23, 3.33, 3.35-3.36)."""
     sat_z, sat_x = saturations(kin)
     return forces_from_saturated(terrain, kin.area, normal, jz * sat_z, jx * sat_x)
 
 
-def compaction_force(vehicle, terrain, kin: Kinematics, normal):
+def compaction_force(
+    vehicle: Vehicle,
+    terrain: Terrain,
+    kin: Kinematics,
+    normal: Float[Array, " 2 N *b"],
+) -> Float[Array, " 2 *b"]:
     """Signed compaction resistance per track along +x [N] (3.40); zero on hard ground."""
     k = tm.bekker_modulus(terrain.k_c, terrain.k_phi, vehicle.track_width)
     per_element = tm.compaction_resistance(

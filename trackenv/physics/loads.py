@@ -3,13 +3,21 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
+from ..params import Vehicle
 from .geometry import contact_area, contact_x, track_y
 
 GRAVITY = 9.81  # m/s^2
 
 
-def normal_loads(vehicle, u, r, nb: int, pitch_gradient=None):
+def normal_loads(
+    vehicle: Vehicle,
+    u: Float[Array, " *b"],
+    r: Float[Array, " *b"],
+    nb: int,
+    pitch_gradient: Float[Array, " *#b"] | None = None,
+) -> Float[Array, " 2 N *b"]:
     """Quasi-static normal force F_n,i [N] at each contact point, shape (2, N, *b).
 
     Rigid body on a Winkler foundation: p(x, y) = p0 + p_x x + p_y y with sum A_i p_i = m g and

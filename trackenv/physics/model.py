@@ -8,12 +8,14 @@ the whole derivative.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
+from ..params import Params
 from . import body, contact, loads, motor
 
 
@@ -28,21 +30,39 @@ class State(eqx.Module):
     extra: ``{effect id: pytree}`` states added by effects (docs/model.md §8).
     """
 
-    pose: jax.Array
-    vel: jax.Array
-    omega: jax.Array
-    current: jax.Array
-    jz: jax.Array
-    jx: jax.Array
+    pose: Float[Array, " 3 *b"]
+    vel: Float[Array, " 3 *b"]
+    omega: Float[Array, " 2 *b"]
+    current: Float[Array, " 2 *b"]
+    jz: Float[Array, " 2 N *b"]
+    jx: Float[Array, " 2 N *b"]
     extra: dict
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
+        """The trailing batch shape ``*b`` (``()`` for a single vehicle)."""
         return self.vel.shape[1:]
 
 
-def initial_state(params, batch_shape: tuple[int, ...] = (), pose=None, vel=None) -> State:
-    """Vehicle at rest (or at the given pose/velocity), zero current and shear displacement."""
+def initial_state(
+    params: Params,
+    batch_shape: tuple[int, ...] = (),
+    pose: Float[ArrayLike, " 3"] | Sequence[float] | None = None,
+    vel: Float[ArrayLike, " 3"] | Sequence[float] | None = None,
+) -> State:
+    """Vehicle at rest (or at the given pose/velocity), zero current and shear displacement.
+
+    **Arguments:**
+
+    - `params`: the model parameters (their ``dtype`` is the state's).
+    - `batch_shape`: the trailing batch shape ``*b`` (``()``: one vehicle).
+    - `pose`: X [m], Y [m], psi [rad], the same for every vehicle of the batch; default zero.
+    - `vel`: u, v [m/s], r [rad/s] (body frame), the same for every vehicle; default zero.
+
+    **Returns:**
+
+    The :class:`State`; effects add their initial states under ``extra``.
+    """
     dtype = params.dtype
     n = params.vehicle.n_contact
     z = lambda *s: jnp.zeros(s + tuple(batch_shape), dtype)  # noqa: E731
@@ -65,9 +85,9 @@ def initial_state(params, batch_shape: tuple[int, ...] = (), pose=None, vel=None
 class Context(NamedTuple):
     """What effects see when they modify loads, forces and rates."""
 
-    params: object
+    params: Params
     state: State
-    voltage: jax.Array  # (2, *b) V
+    voltage: Float[Array, " 2 *b"]  # (2, *b) V
     kin: contact.Kinematics
     nb: int
 
@@ -78,12 +98,25 @@ class Evaluation(NamedTuple):
     drive: State  # N(x): full derivative for non-stiff states, drive term for stiff ones
     kin: contact.Kinematics
     forces: contact.ContactForces
-    tau_back: jax.Array  # N m, (2, *b) shear back torque r_s' sum F_long (3.22)
-    tau_int: jax.Array  # N m, (2, *b)
+    tau_back: Float[Array, " 2 *b"]  # N m, (2, *b) shear back torque r_s' sum F_long (3.22)
+    tau_int: Float[Array, " 2 *b"]  # N m, (2, *b)
 
 
-def evaluate(state: State, voltage, params) -> Evaluation:
-    """Evaluate forces and the non-stiff part of the state derivative at one instant."""
+def evaluate(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> Evaluation:
+    """Evaluate forces and the non-stiff part of the state derivative at one instant.
+
+    **Arguments:**
+
+    - `state`: the vehicle state (SI, shapes as in :class:`State`).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b).
+    - `params`: the model parameters (vehicle, terrain, internal resistance, effects).
+
+    **Returns:**
+
+    An :class:`Evaluation`: the drive terms N(x) (full derivative of the non-stiff states, drive term
+    of the stiff ones, in state units per second), the kinematics, the contact forces [N] and the back
+    and internal torques [N m].
+    """
     veh, ter = params.vehicle, params.terrain
     nb = state.vel.ndim - 1
     kin = contact.kinematics(veh, ter, state.vel, state.omega, nb)
@@ -132,14 +165,28 @@ def evaluate(state: State, voltage, params) -> Evaluation:
     return Evaluation(drive, kin, forces, tau_back, tau_int)
 
 
-def decay_rates(params, kin: contact.Kinematics, belt_speed):
+def decay_rates(
+    params: Params, kin: contact.Kinematics, belt_speed: Float[Array, " 2 *b"]
+) -> tuple[Float[Array, " *#b"], Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
     """Decay rates (lambda) of the stiff states: current R_m/L_m, shear |V_t|/z* (docs/model.md §6)."""
     lam_z, lam_x = contact.shear_decay_rates(belt_speed, kin)
     return motor.current_decay_rate(params.vehicle), lam_z, lam_x
 
 
-def derivative(state: State, voltage, params) -> State:
-    """The full state derivative dx/dt (for reference solvers and checks)."""
+def derivative(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> State:
+    """The full state derivative dx/dt (for reference solvers and checks).
+
+    **Arguments:**
+
+    - `state`: the vehicle state (SI).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b).
+    - `params`: the model parameters.
+
+    **Returns:**
+
+    dx/dt as a :class:`State` of rates: [m/s, m/s, rad/s], [m/s^2, m/s^2, rad/s^2], [rad/s^2], [A/s],
+    [m/s], [m/s] (and the effects' rates under ``extra``).
+    """
     ev = evaluate(state, voltage, params)
     lam_i, lam_z, lam_x = decay_rates(params, ev.kin, ev.kin.belt_speed)
     d = ev.drive
@@ -155,19 +202,30 @@ def derivative(state: State, voltage, params) -> State:
 class PowerBalance(NamedTuple):
     """Instantaneous power flows [W] (for the energy-balance check); each (*b)."""
 
-    electrical: jax.Array  # sum V i, into the motors
-    copper: jax.Array  # sum R i^2
-    friction: jax.Array  # sum (b_eff omega + tau_stick sgn omega) omega
-    internal: jax.Array  # sum tau_int omega
-    shear_slip: jax.Array  # sum F_long s_k - F_lat v_y: dissipated by shearing the ground
-    compaction: jax.Array  # - sum R_c (u - r y_k): dissipated compacting the ground
-    conversion: jax.Array  # (alpha - alpha_v) i omega: K_t G_r and G_r/K_v differ by 0.25% (Table B.1)
-    external: jax.Array  # power of effect forces/torques on the body and sprockets (effects)
-    stored: jax.Array  # kinetic energy of body and drive + magnetic energy of the motors [J]
+    electrical: Float[Array, " *b"]  # sum V i, into the motors
+    copper: Float[Array, " *b"]  # sum R i^2
+    friction: Float[Array, " *b"]  # sum (b_eff omega + tau_stick sgn omega) omega
+    internal: Float[Array, " *b"]  # sum tau_int omega
+    shear_slip: Float[Array, " *b"]  # sum F_long s_k - F_lat v_y: dissipated by shearing the ground
+    compaction: Float[Array, " *b"]  # - sum R_c (u - r y_k): dissipated compacting the ground
+    conversion: Float[Array, " *b"]  # (alpha - alpha_v) i omega: K_t G_r and G_r/K_v differ by 0.25% (Table B.1)
+    external: Float[Array, " *b"]  # power of effect forces/torques on the body and sprockets (effects)
+    stored: Float[Array, " *b"]  # kinetic energy of body and drive + magnetic energy of the motors [J]
 
 
-def power_balance(state: State, voltage, params) -> PowerBalance:
-    """Power flows of the base model; d(stored)/dt = electrical - all losses (energy balance)."""
+def power_balance(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> PowerBalance:
+    """Power flows of the base model; d(stored)/dt = electrical - all losses (energy balance).
+
+    **Arguments:**
+
+    - `state`: the vehicle state (SI).
+    - `voltage`: motor voltages, left/right [V], shape (2, *b).
+    - `params`: the model parameters.
+
+    **Returns:**
+
+    A :class:`PowerBalance`: each flow [W] and the stored energy [J], shape (*b).
+    """
     veh = params.vehicle
     ev = evaluate(state, voltage, params)
     f, kin = ev.forces, ev.kin
