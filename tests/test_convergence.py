@@ -30,7 +30,7 @@ pytestmark = pytest.mark.slow
 
 CHANNELS = ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "y", "heading")
 # The maneuvers of trackenv.check_maneuvers; the zero-radius turn keeps z-bar at mid-track, where the
-# lateral decay rate (3.31) is ~1e6 1/s and switches element by element as z-bar jitters: the adaptive
+# lateral decay rate (3.32) is ~1e6 1/s and switches element by element as z-bar jitters: the adaptive
 # reference needs > 10 min there, so the spins are checked by self-convergence against a 4x finer substep.
 MANEUVERS = {k: m for k, m in check_maneuvers().items() if not is_spin(m)}
 SPINS = {k: m for k, m in check_maneuvers().items() if is_spin(m)}

@@ -111,9 +111,8 @@ def bekker_sinkage(normal_pressure: _In, k: _In, n: _In) -> _Out:
 def compaction_resistance(normal_force: _In, area: _In, contact_length: _In, k: _In, n: _In) -> _Out:
     """Bekker compaction resistance of one track, discretised (3.40) [N].
 
-    R_c = sum_i A_i / ((n+1) L k^(1/n)) (F_n,i / A_i)^((n+1)/n); the element axis is ``-1`` of
-    ``normal_force``/``area`` after any leading axes, i.e. it sums over axis ``axis_elements``.
-    Returns per-element contributions; callers sum over the element axis.
+    R_c = sum_i A_i / ((n+1) L k^(1/n)) (F_n,i / A_i)^((n+1)/n). Elementwise: returns the per-element
+    contributions, and callers sum over the element axis.
     """
     pressure = jnp.maximum(normal_force, 0.0) / area
     return area / ((n + 1.0) * contact_length * k ** (1.0 / n)) * pressure ** ((n + 1.0) / n)
