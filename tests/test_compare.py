@@ -89,3 +89,17 @@ def test_stack_trees_along_a_new_last_axis():
     np.testing.assert_array_equal(np.asarray(st["b"])[1], [0, 1, 2, 3])
     st32 = C.stack_trees([{"a": 1.0}, {"a": 2.0}], jnp.float32)
     assert st32["a"].dtype == jnp.float32 and st32["a"].tolist() == [1.0, 2.0]
+
+
+def test_simulate_batch_is_simulate_without_checks():
+    import trackenv as te
+    from trackenv.simulate import n_substeps, simulate_batch
+
+    params = C.stack_trees([te.load_params("dry_sand"), te.load_params("asphalt")])
+    profile = te.VoltageProfile.from_arrays([0.0, 0.2, 0.5], np.array([[0, 0], [6, 9], [6, 9]], float)[:, :, None]
+                                            * np.ones((1, 1, 2)))
+    ref = te.simulate(params, profile, 0.5, dt=0.05)
+    got = simulate_batch(params, profile, 10, 0.05, n_substeps(0.05, 0.0005))
+    assert got.channels["x"].shape == (11, 2) and got.diverged.shape == (2,)
+    for k in ("x", "yaw_rate", "i_left"):
+        np.testing.assert_array_equal(np.asarray(got.channels[k]), np.asarray(ref.channels[k]))
