@@ -7,10 +7,10 @@ that padding wastes at most half the work). Each test's voltages are resampled o
 common grid (step ≤ 10 ms and ≤ the log's smallest interval, so the log's own breakpoints are kept for
 logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample times by linear
 interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
-and the pose is moved into the log's frame by its first pose sample — the rules of :mod:`trackenv.compare`,
-which :func:`trackenv.replay.replay` follows for one test. Each bucket is one call of
-:func:`trackenv.simulate.simulate_batch`. Compiled programs are cached per (candidate, bucket shape), so every round of a
-fit reuses them.
+and the pose is moved into the log's frame by its first pose sample: the rules of
+:mod:`trackenv.compare`, which :func:`trackenv.replay.replay` follows for one test. Each bucket is one
+call of :func:`trackenv.simulate.simulate_batch`; compiled programs are cached per (candidate, bucket
+shape), so every round of a fit reuses them.
 """
 
 from __future__ import annotations
