@@ -28,7 +28,7 @@ measured channel is constant), ``bias`` (mean of simulated − measured), ``max_
 ``meta.json`` says ``current_sensor: "absolute"``, the simulated currents are compared as |i| and
 written as |i|. Pose (``x``, ``y``, ``heading``): the simulated pose is moved into the log's frame
 by the log's first pose sample (missing values count as 0) before comparing; heading errors are
-wrapped to (−π, π].
+wrapped to (−π, π]. (These rules are :mod:`trackenv.compare`'s, shared with the diagnosis.)
 
 **Thesis test id.** The voltages are the RECONSTRUCTED profiles of ``configs/field`` (thesis text,
 not measured; see its README): there is nothing measured to compare with, so ``metrics.json`` lists
@@ -47,6 +47,15 @@ from typing import Any, Literal
 
 import numpy as np
 
+from .compare import (
+    channel_error,
+    interp_at,
+    json_clean,
+    pose_from_log_frame,
+    pose_to_log_frame,
+    rectify_channels,
+    unwrap_measured,
+)
 from .fieldlog import FieldLog, FieldLogError, read_field_log, write_field_log, write_log_columns
 from .outputs import prepare_output_dir
 from .simulate import DEFAULT_DT, DEFAULT_SUBSTEP
@@ -106,19 +115,12 @@ def _grid_step(dt: float, substep: float, min_interval: float) -> float:
     return k * substep
 
 
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
-def _channel_metrics(sim: np.ndarray, meas: np.ndarray, angle: bool = False) -> dict | None:
+def _channel_metrics(signal: str, sim: np.ndarray, meas: np.ndarray) -> dict | None:
     ok = np.isfinite(meas)
     if not ok.any():
         return None
-    err = sim[ok] - meas[ok]
-    m = meas[ok]
-    if angle:
-        err = _wrap(err)
-        m = np.unwrap(m)
+    err = channel_error(signal, sim[ok], meas[ok])
+    m = unwrap_measured(meas)[ok] if signal == "heading" else meas[ok]
     rng = float(np.max(m) - np.min(m))
     rmse = float(np.sqrt(np.mean(err**2)))
     return {"rmse": rmse, "nrmse": (rmse / rng) if rng > 0 else None, "range": rng, "bias": float(np.mean(err)),
@@ -127,14 +129,8 @@ def _channel_metrics(sim: np.ndarray, meas: np.ndarray, angle: bool = False) -> 
 
 def _simulated_at(traj, grid: np.ndarray, times: np.ndarray, sensor: str, pose0: tuple[float, float, float]) -> dict:
     """Simulated instrument channels at ``times`` (simulation time base), as the log's instruments report them."""
-    ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
-    at = {k: np.interp(times, grid, ch[k]) for k in COMPARED}
-    if sensor == "absolute":
-        at["i_left"], at["i_right"] = np.abs(at["i_left"]), np.abs(at["i_right"])
-    x0, y0, h0 = pose0
-    c, s = math.cos(h0), math.sin(h0)
-    xs, ys = at["x"], at["y"]
-    at["x"], at["y"], at["heading"] = x0 + c * xs - s * ys, y0 + s * xs + c * ys, h0 + at["heading"]
+    at = rectify_channels({k: interp_at(times, grid, traj.channels[k]) for k in COMPARED}, sensor)
+    at["x"], at["y"], at["heading"] = pose_to_log_frame(at["x"], at["y"], at["heading"], pose0)
     return at
 
 
@@ -152,7 +148,7 @@ def _files(log, meta, figure, metrics) -> dict:
 
 
 def _json_dump(path: Path, obj) -> Path:
-    path.write_text(json.dumps(obj, indent=2, allow_nan=False, ensure_ascii=False) + "\n", encoding="utf-8")
+    path.write_text(json.dumps(json_clean(obj), indent=2, allow_nan=False, ensure_ascii=False) + "\n", encoding="utf-8")
     return path
 
 
@@ -253,7 +249,7 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
     channels, absent = {}, []
     for col in COMPARED:
         if col in measured:
-            channels[col] = _channel_metrics(sim[col], measured[col], angle=(col == "heading"))
+            channels[col] = _channel_metrics(col, sim[col], measured[col])
         else:
             absent.append(col)
 
@@ -277,10 +273,7 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
     meas_plot = {"t": tt, "v_left": log.volts[:, 0], "v_right": log.volts[:, 1]}
     meas_plot.update({k: v for k, v in measured.items() if k not in ("x", "y", "heading")})
     if "x" in measured and "y" in measured:  # measured pose into the simulation's frame, for the figure
-        x0, y0, h0 = pose0
-        c, s = math.cos(h0), math.sin(h0)
-        dx, dy = measured["x"] - x0, measured["y"] - y0
-        meas_plot["x"], meas_plot["y"] = c * dx + s * dy, -s * dx + c * dy
+        meas_plot["x"], meas_plot["y"], _ = pose_from_log_frame(measured["x"], measured["y"], 0.0, pose0)
     label = "log, synthetic" if log.synthetic else "field log"
     caption = (f"replay of {log.folder} ({label}, {len(log)} samples, ammeter {sensor}); simulated with "
                f"{terrain_id}, {internal or 'constant'} internal resistance"

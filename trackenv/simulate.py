@@ -9,7 +9,8 @@
 One compiled program per (shape, dtype, dt, substeps, effects); the core is a pure function
 (:func:`simulate_core`) that works under ``jax.jit``, ``jax.vmap`` and ``jax.grad``. Batches can
 also be laid out with the vehicle index on the last axis of the profile and the parameters
-(docs/model.md §6), which needs no ``vmap``.
+(docs/model.md §6), which needs no ``vmap``; :func:`simulate_batch` is the compiled core for such a
+batch without ``simulate``'s checks (what the diagnosis calls, also under ``jax.jacfwd``).
 
 Precision: float32 by default; pass parameters loaded with ``dtype=jnp.float64`` (and enable
 ``jax_enable_x64``) for float64. Both agree to well under 1% on the thesis maneuvers (tests).
@@ -205,6 +206,37 @@ def simulate_core(params, profile: VoltageProfile, state0: State, n_steps: int, 
 _simulate_jit = jax.jit(simulate_core, static_argnames=("n_steps", "dt", "substeps", "t0", "unroll"))
 
 
+def simulate_batch(params, profile: VoltageProfile, n_steps: int, dt: float, substeps: int,
+                   initial: State | None = None, *, t0: float = 0.0, unroll: int = 1) -> Trajectory:
+    """The compiled simulation core on a batch of vehicles, without :func:`simulate`'s checks.
+
+    One compiled program per (shapes, dtype, ``n_steps``, ``dt``, ``substeps``, ``t0``, ``unroll``, effects),
+    cached by JAX; usable inside ``jax.jit``, ``jax.jacfwd``, ``jax.grad`` (traced parameters). Nothing is
+    validated and nothing is raised: a diverged vehicle is only flagged (``diverged``/``t_diverged``).
+
+    Args:
+        params: :class:`trackenv.params.Params` whose floating leaves are scalars or (*b) arrays, the
+            vehicles on the last axis (:func:`trackenv.compare.stack_trees` stacks per-vehicle parameters);
+            its dtype sets the precision.
+        profile: :class:`VoltageProfile` with ``t`` (K,) and ``volts`` (K, 2, *b) in ``params``'s dtype.
+        n_steps: number of output steps (static).
+        dt: output interval [s] (static).
+        substeps: integration substeps per output step (static; :func:`n_substeps` from a largest substep).
+        initial: initial :class:`State` with batch shape *b (default: at rest at the origin, heading 0,
+            batch shape ``profile.volts.shape[2:]``).
+        t0: time of the first sample [s] (static).
+        unroll: scan unrolling of the substeps (static).
+
+    Returns:
+        :class:`Trajectory` with T = ``n_steps + 1`` samples: ``t`` (T,), each channel (T, *b), ``voltage``
+        (T, 2, *b), ``diverged`` and ``t_diverged`` (*b).
+    """
+    if initial is None:
+        initial = initial_state(params, tuple(profile.volts.shape[2:]))
+    return _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps, t0=t0,
+                         unroll=unroll)
+
+
 def simulate(
     params,
     profile: VoltageProfile,
@@ -257,7 +289,7 @@ def simulate(
         params, profile, initial = shard((params, profile, initial), batch[0], axis=-1)
         profile = VoltageProfile(jax.device_put(profile.t, jax.sharding.NamedSharding(
             profile.volts.sharding.mesh, jax.sharding.PartitionSpec())), profile.volts)
-    traj = _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps)
+    traj = simulate_batch(params, profile, n_steps, dt, substeps, initial)
     if on_divergence == "raise" and not isinstance(traj.diverged, jax.core.Tracer):
         div = np.asarray(traj.diverged)
         if div.any():

@@ -7,9 +7,10 @@ that padding wastes at most half the work). Each test's voltages are resampled o
 common grid (step ≤ 10 ms and ≤ the log's smallest interval, so the log's own breakpoints are kept for
 logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample times by linear
 interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
-and the pose is moved into the log's frame by its first pose sample — as :func:`trackenv.replay.replay`
-does for one test. Compiled programs are cached per (candidate, bucket shape), so every round of a
-fit reuses them.
+and the pose is moved into the log's frame by its first pose sample: the rules of
+:mod:`trackenv.compare`, which :func:`trackenv.replay.replay` follows for one test. Each bucket is one
+call of :func:`trackenv.simulate.simulate_batch`; compiled programs are cached per (candidate, bucket
+shape), so every round of a fit reuses them.
 """
 
 from __future__ import annotations
@@ -22,9 +23,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compare import POSE, SampleWeights, at_samples, grid_weights, pose_to_log_frame, rectify, stack_trees
 from ..params import load_params
-from ..physics.model import initial_state
-from ..simulate import VoltageProfile, _simulate_jit
+from ..simulate import VoltageProfile, simulate_batch
 from .candidates import Candidate
 from .data import TestData
 
@@ -103,10 +104,6 @@ def _instruments_jit(effect, channels, t, params):
     return effect.instruments(channels, t, params)
 
 
-def _stack(trees):
-    return jax.tree.map(lambda *xs: jnp.stack(xs, -1) if eqx.is_inexact_array(xs[0]) else xs[0], *trees)
-
-
 class BatchSimulator:
     """Simulates candidates' parameter sets on every test; returns predictions at the logs' sample times."""
 
@@ -123,12 +120,10 @@ class BatchSimulator:
         self.n_vehicle_seconds = 0.0
         self._base_channels = {}  # bucket index -> raw base-model channels on the output grid (T, nb)
         # interpolation of the output grid at each log's times
-        self._interp = {}
+        self._interp: dict[int, SampleWeights] = {}
         for b in self.buckets:
             for j in b.tests:
-                x = self.tests[j].t / b.dt
-                i0 = np.clip(np.floor(x).astype(int), 0, b.n_steps - 1)
-                self._interp[j] = (i0, (x - i0)[:, None])
+                self._interp[j] = grid_weights(self.tests[j].t, b.dt, b.n_steps)
 
     def run(self, cand: Candidate, values: dict, progress=None, windows: tuple = ()) -> tuple[list[dict], np.ndarray]:
         """Simulate ``values`` ({name: (S,)} physical parameter sets) on every test.
@@ -148,10 +143,8 @@ class BatchSimulator:
             if "speed_ideal" in p:
                 sp = self._speed_grid[j]  # (T, S) on the output grid
                 g = self._grid_of[j]
-                i0, w = self._interp[j]
                 for k, win in enumerate(windows):
-                    avg = encoder_average(g, sp, win)
-                    q["speed_ideal"][:, k::nw] = avg[i0] * (1.0 - w) + avg[i0 + 1] * w
+                    q["speed_ideal"][:, k::nw] = at_samples(encoder_average(g, sp, win), self._interp[j])
             out.append(q)
         return out, np.repeat(div, nw, axis=1)
 
@@ -184,7 +177,7 @@ class BatchSimulator:
     def _params(self, b: Bucket, cand: Candidate, values: dict, S: int):
         """Params of bucket ``b`` with ``S`` parameter sets of ``cand`` per test: leaves (nb * S,)."""
         nb = len(b.tests)
-        base = _stack([self.base[j] for j in b.tests])  # leaves (nb,)
+        base = stack_trees([self.base[j] for j in b.tests])  # leaves (nb,)
         base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
         vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
         return cand.apply(base, vals, {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)})
@@ -193,15 +186,14 @@ class BatchSimulator:
         """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,)."""
         volts = np.repeat(b.volts, n_vehicles // len(b.tests), axis=-1)
         prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
-        traj = _simulate_jit(params, prof, initial_state(params, (n_vehicles,)), n_steps=b.n_steps, dt=float(b.dt),
-                             substeps=b.substeps)
+        traj = simulate_batch(params, prof, b.n_steps, b.dt, b.substeps)  # starts at rest, (n_vehicles,) batch
         self.n_vehicle_seconds += n_vehicles * b.n_steps * b.dt
         return {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}, np.asarray(traj.diverged)
 
     def base_channels(self, bi: int, b: Bucket) -> dict:
         """The base model's raw channels of bucket ``bi`` (simulated once, then reused)."""
         if bi not in self._base_channels:
-            base = _stack([self.base[j] for j in b.tests])
+            base = stack_trees([self.base[j] for j in b.tests])
             self._base_channels[bi] = self._simulate(b, base, len(b.tests))
         return self._base_channels[bi][0]
 
@@ -215,21 +207,18 @@ class BatchSimulator:
         return {k: np.asarray(v, np.float64) for k, v in ch.items()}
 
     def _at_log(self, j: int, ch: dict) -> dict:
-        test = self.tests[j]
-        i0, w = self._interp[j]
-        out = {}
-        for sig in test.measured:
-            if sig in ("x", "y", "heading"):
-                continue
-            v = ch[sig]
-            v = v[i0] * (1.0 - w) + v[i0 + 1] * w
-            if sig in ("i_left", "i_right") and test.sensor == "absolute":
-                v = np.abs(v)
-            out[sig] = v
-        if any(s in test.measured for s in ("x", "y", "heading")):
-            xs, ys, hs = (ch[k][i0] * (1.0 - w) + ch[k][i0 + 1] * w for k in ("x", "y", "heading"))
-            x0, y0, h0 = test.pose0
-            c, s = math.cos(h0), math.sin(h0)
-            pose = {"x": x0 + c * xs - s * ys, "y": y0 + s * xs + c * ys, "heading": h0 + hs}
-            out.update({k: v for k, v in pose.items() if k in test.measured})
-        return out
+        return predictions_at_log(self.tests[j], ch, self._interp[j])
+
+
+def predictions_at_log(test: TestData, ch: dict, weights: SampleWeights) -> dict:
+    """Simulated channels ``ch`` {name: (T, S)} on a bucket's grid -> {signal: (K, S)} for ``test``'s measured
+    signals, as its instruments report them (:mod:`trackenv.compare`): at its sample times, rectified for an
+    absolute ammeter, the pose in its frame. Numpy or jax arrays (traceable)."""
+    out = {}
+    for sig in test.measured:
+        if sig not in POSE:
+            out[sig] = rectify(sig, at_samples(ch[sig], weights), test.sensor)
+    if any(s in test.measured for s in POSE):
+        pose = dict(zip(POSE, pose_to_log_frame(*(at_samples(ch[k], weights) for k in POSE), test.pose0)))
+        out.update({k: v for k, v in pose.items() if k in test.measured})
+    return out

@@ -71,6 +71,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compare import stack_trees
 from ..effects.base import Effect
 from ..envs.tasks import MANEUVERS as TASK_MANEUVERS
 
@@ -644,12 +645,6 @@ def _params(terrain, nuisance, effect=None):
     return te.replace(p, **changes)
 
 
-def _stack(trees):
-    """Stack pytrees of scalars along a new last axis (the vehicle axis of a batch, docs/model.md §6)."""
-    return jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x, jnp.float32) for x in xs], axis=-1)
-                        if eqx.is_inexact_array_like(xs[0]) else xs[0], *trees)
-
-
 def _batch_profile(col_profiles, t_sim=T_SIM):
     """One VoltageProfile (K_PAD, 2, B) from per-column breakpoint profiles [(t, volts), ...] (B = N_COLS)."""
     import trackenv as te
@@ -683,7 +678,7 @@ def _simulate_columns(columns, col_profiles, t_sim=T_SIM):
         if key not in cache:
             cache[key] = _params(terrain, nuisance, effect)
         trees.append(cache[key])
-    params = _stack(trees)
+    params = stack_trees(trees, jnp.float32)  # vehicles on the last axis (docs/model.md §6)
     traj = te.simulate(params, _batch_profile(col_profiles, t_sim), t_sim, dt=SIM_DT, on_divergence="flag")
     ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
     return ch, np.asarray(traj.diverged)

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compare import unwrap_measured
 from ..fieldlog import MEASURED_COLUMNS, OPTIONAL_COLUMNS, FieldLog, FieldLogError, read_field_log
 from .phases import segment_phases
 
@@ -115,8 +116,7 @@ def prepare_test(log: FieldLog, name: str) -> TestData:
             notes.append(f"{sig} excluded: only {100 * present.mean():.0f}% of its samples are present")
             continue
         if sig == "heading":
-            x = x.copy()
-            x[present] = np.unwrap(x[present])
+            x = unwrap_measured(x)
         s = robust_span(x)
         if not (s > 0):
             notes.append(f"{sig} excluded: constant (nothing to compare)")

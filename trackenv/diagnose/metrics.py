@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compare import channel_error
 from .data import TestData
 
 BLOCK_S = 0.5
@@ -34,12 +35,9 @@ def signal_weight(test: TestData, sig: str) -> float:
 
 
 def signal_error(test: TestData, sig: str, pred: np.ndarray) -> np.ndarray:
-    """sim − meas of ``sig`` for predictions (K,) or (K, S); heading errors wrapped to (−π, π]."""
-    meas = test.measured[sig]
-    e = pred - meas.reshape(meas.shape + (1,) * (np.ndim(pred) - 1))
-    if sig == "heading":
-        e = (e + np.pi) % (2 * np.pi) - np.pi
-    return e
+    """sim − meas of ``sig`` for predictions (K,) or (K, S); heading errors wrapped to (−π, π]
+    (:func:`trackenv.compare.channel_error`)."""
+    return channel_error(sig, pred, test.measured[sig])
 
 
 def lag_of(t: np.ndarray, sim: np.ndarray, meas: np.ndarray, mask: np.ndarray, max_lag: float = 0.5) -> float | None:

@@ -7,7 +7,7 @@ After the derivative-free search (:mod:`.fit`) each fold's best point is refined
   stays inside the bounds (a point on a bound stays near it: the logistic map is flat there);
 - the Jacobian ∂r/∂z is by default a *secant* (central-difference) Jacobian over ±``SECANT_STEP`` in z from
   the batched simulator: 2p + 1 points per fold, all folds in one simulation. ``jacobian="forward"`` uses
-  ``jax.jacfwd`` through :func:`trackenv.simulate._simulate_jit` instead (each vehicle of the batch belongs
+  ``jax.jacfwd`` through :func:`trackenv.simulate.simulate_batch` instead (each vehicle of the batch belongs
   to one fold, so a shared perturbation δ added to every fold's z gives each fold's own Jacobian in one
   forward-mode pass with p tangents). The forward-mode Jacobian is exact for the discrete simulation, but
   stick-slip after a stop and chattering contact amplify its sensitivities. On a blind null case the
@@ -32,9 +32,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics.model import initial_state
-from ..simulate import VoltageProfile, _simulate_jit
-from .batch import _stack
+from ..compare import POSE, stack_trees, wrap_angle
+from ..simulate import VoltageProfile, simulate_batch
+from .batch import predictions_at_log
 from .candidates import Candidate
 from .metrics import signal_weight
 
@@ -103,7 +103,7 @@ class _Problem:
         out = {}
         for bi, b in enumerate(sim.buckets):
             nb = len(b.tests)
-            base = _stack([sim.base[j] for j in b.tests])
+            base = stack_trees([sim.base[j] for j in b.tests])
             base = jax.tree.map(lambda x: jnp.repeat(x, F, axis=-1) if eqx.is_inexact_array(x) else x, base)
             v = {k: jnp.tile(x, nb) for k, x in vals.items()}
             ref = {"b_int_constant": np.repeat(sim.b_int_constant[list(b.tests)], F)}
@@ -117,31 +117,17 @@ class _Problem:
             else:
                 volts = np.repeat(b.volts, F, axis=-1)
                 prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
-                traj = _simulate_jit(params, prof, initial_state(params, (nb * F,)), n_steps=b.n_steps,
-                                     dt=float(b.dt), substeps=b.substeps)
+                traj = simulate_batch(params, prof, b.n_steps, b.dt, b.substeps)  # (nb * F,) vehicles
                 ch = dict(traj.channels)
                 if np.any(windows > 0):
                     win = jnp.asarray(np.tile(windows, nb), params.dtype)
                     ch["speed_ideal"] = _encoder_average_jnp(t, ch["speed_ideal"], win)
             for q, j in enumerate(b.tests):
-                test = sim.tests[j]
-                i0, w = sim._interp[j]
                 cols = slice(q * F, (q + 1) * F)
-                at = lambda x, i0=i0, cols=cols, w=w: x[i0, cols] * (1.0 - w) + x[i0 + 1, cols] * w  # noqa: E731  (K, F)
-                pose = None
-                for s in test.measured:
-                    if s in ("x", "y", "heading"):
-                        if pose is None:
-                            xs, ys, hs = at(ch["x"]), at(ch["y"]), at(ch["heading"])
-                            x0, y0, h0 = test.pose0
-                            c, sn = math.cos(h0), math.sin(h0)
-                            pose = {"x": x0 + c * xs - sn * ys, "y": y0 + sn * xs + c * ys, "heading": h0 + hs}
-                        out[(j, s)] = pose[s].T
-                        continue
-                    x = at(ch[s])
-                    if s in ("i_left", "i_right") and test.sensor == "absolute":
-                        x = jnp.abs(x)
-                    out[(j, s)] = x.T
+                test = sim.tests[j]
+                need = set(test.measured) | (set(POSE) if any(k in test.measured for k in POSE) else set())
+                at_log = predictions_at_log(test, {k: ch[k][:, cols] for k in need}, sim._interp[j])
+                out.update({(j, s): x.T for s, x in at_log.items()})  # (F, K)
         return out
 
     def _residual(self, z):
@@ -150,7 +136,7 @@ class _Problem:
         for (j, s), meas, coef in zip(self.sigs, self.meas, self.coef):
             e = pred[(j, s)] - jnp.asarray(meas, pred[(j, s)].dtype)[None]
             if s == "heading":
-                e = (e + jnp.pi) % (2 * jnp.pi) - jnp.pi
+                e = wrap_angle(e)
             rs.append(e * jnp.asarray(coef[np.arange(e.shape[0]) % self.F], e.dtype))
         return jnp.concatenate(rs, axis=1), pred
 

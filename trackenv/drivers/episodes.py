@@ -207,18 +207,11 @@ def _f(x, nd):
 
 
 def jsonable(obj):
-    """``obj`` with numpy scalars as Python numbers and non-finite floats as None (for JSON)."""
-    if isinstance(obj, dict):
-        return {k: jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return None if not np.isfinite(obj) else float(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
+    """``obj`` with numpy scalars as Python numbers and non-finite floats as None (for JSON):
+    :func:`trackenv.compare.json_clean`."""
+    from ..compare import json_clean
+
+    return json_clean(obj)
 
 
 def write_json(result: dict, path: str | Path) -> Path:
