@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compare import json_clean as _clean
 from .batch import FIT_SUBSTEP, BatchSimulator
 from .candidates import NONE, RECALIBRATE, candidate_set
 from .data import DiagnosisError, TestData, load_tests
@@ -547,17 +548,3 @@ def _spans(t: TestData) -> list:
     from .phases import phase_spans
 
     return [{"phase": p, "t0": a, "t1": b} for p, a, b in phase_spans(t.t, t.phase)]
-
-
-def _clean(x):
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
