@@ -16,7 +16,7 @@ import numpy as np
 import trackenv as te
 from trackenv.check_maneuvers import check_maneuvers
 from trackenv.physics.model import initial_state
-from trackenv.simulate import MAX_SUBSTEP, _simulate_jit, n_substeps
+from trackenv.simulate import MAX_SUBSTEP, n_substeps, simulate_batch
 
 MANEUVERS = {
     **check_maneuvers(),
@@ -35,7 +35,7 @@ def main():
         for terrain, rows, t_end in MANEUVERS.values():
             p = te.load_params(terrain)
             prof = te.VoltageProfile.from_breakpoints(rows)
-            tr = _simulate_jit(p, prof, initial_state(p), n_steps=int(round(t_end / DT)), dt=DT, substeps=n_substeps(DT, h))
+            tr = simulate_batch(p, prof, int(round(t_end / DT)), DT, n_substeps(DT, h), initial_state(p))
             i = np.nanmax(np.abs(np.asarray(tr.state.current)))
             cells.append(("**diverged** " if bool(tr.diverged) else "") + f"{i:.3g} A")
         print(f"| {h * 1e3:g} | " + " | ".join(cells) + " |", flush=True)
