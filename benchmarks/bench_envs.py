@@ -33,41 +33,41 @@ from trackenv.envs.core import ENV_DEFAULT_SUBSTEP as DEFAULT_SUBSTEP
 from trackenv.envs.vector import TrackVectorEnv
 
 
+def _rate(step, per_call: int, seconds: float, rounds: int, first=None) -> tuple[float, float]:
+    """(seconds of ``first()`` (default ``step()``: the call that compiles), best calls of ``step`` x ``per_call``
+    per second over ``rounds`` timed rounds)."""
+    t0 = time.perf_counter()
+    (first or step)()
+    first = time.perf_counter() - t0
+    best = 0.0
+    for _ in range(rounds):
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds / rounds or n == 0:
+            step()
+            n += 1
+        best = max(best, n * per_call / (time.perf_counter() - t0))
+    return first, best
+
+
 def bench_single(substep: float, seconds: float) -> tuple[float, float]:
     env = gym.make("trackenv/GoStop-v0", substep=substep)
     env.reset(seed=0)
     a = np.array([11.8, 11.8], np.float32)
-    t0 = time.perf_counter()
-    env.step(a)
-    first = time.perf_counter() - t0
-    best = 0.0
-    for _ in range(3):
-        n, t0 = 0, time.perf_counter()
-        while time.perf_counter() - t0 < seconds / 3:
-            for _ in range(50):
-                _, _, term, trunc, _ = env.step(a)
-                if term or trunc:
-                    env.reset()
-            n += 50
-        best = max(best, n / (time.perf_counter() - t0))
-    return first, best
+
+    def fifty_steps():
+        for _ in range(50):
+            _, _, term, trunc, _ = env.step(a)
+            if term or trunc:
+                env.reset()
+
+    return _rate(fifty_steps, 50, seconds, 3, first=lambda: env.step(a))
 
 
 def bench_vector(n_envs: int, substep: float, seconds: float, batching: str) -> tuple[float, float]:
     venv = TrackVectorEnv("go_stop", n_envs, substep=substep, autoreset_mode="same_step", physics_batching=batching)
     venv.reset(seed=0)
     a = np.full((n_envs, 2), 11.8, np.float32)
-    t0 = time.perf_counter()
-    venv.step(a)
-    first = time.perf_counter() - t0
-    best = 0.0
-    for _ in range(2):
-        n, t0 = 0, time.perf_counter()
-        while time.perf_counter() - t0 < seconds / 2 or n == 0:
-            venv.step(a)
-            n += 1
-        best = max(best, n * n_envs / (time.perf_counter() - t0))
-    return first, best
+    return _rate(lambda: venv.step(a), n_envs, seconds, 2)
 
 
 def main(argv=None):

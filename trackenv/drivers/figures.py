@@ -7,6 +7,16 @@ from pathlib import Path
 COLORS = {"learned": "tab:blue", "open_loop": "tab:orange", "classical": "tab:green"}
 
 
+def _save(fig, path):
+    """Lay out, write (110 dpi) and close ``fig``; returns ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def make_figures(all_eps: dict, task: str, terrain: str, folder: Path) -> list[Path]:
     """Trajectories, voltages, speed and yaw-rate traces of the first episode of each method (PNG)."""
     import matplotlib  # noqa: PLC0415
@@ -35,10 +45,7 @@ def make_figures(all_eps: dict, task: str, terrain: str, folder: Path) -> list[P
     uniq = dict(zip(labels, handles))
     ax.legend(uniq.values(), uniq.keys(), fontsize=8)
     p = folder / f"{name}_trajectories.png"
-    fig.tight_layout()
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(_save(fig, p))
 
     fig, axes = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     for m, eps in all_eps.items():
@@ -51,10 +58,7 @@ def make_figures(all_eps: dict, task: str, terrain: str, folder: Path) -> list[P
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{task} on {terrain}: motor voltages", fontsize=9)
     p = folder / f"{name}_voltages.png"
-    fig.tight_layout()
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(_save(fig, p))
 
     fig, axes = plt.subplots(3, 1, figsize=(7, 6.5), sharex=True)
     for m, eps in all_eps.items():
@@ -70,8 +74,5 @@ def make_figures(all_eps: dict, task: str, terrain: str, folder: Path) -> list[P
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{task} on {terrain}: speed, yaw rate, currents", fontsize=9)
     p = folder / f"{name}_traces.png"
-    fig.tight_layout()
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(_save(fig, p))
     return paths
