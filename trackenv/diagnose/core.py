@@ -42,6 +42,7 @@ from .stats import (
     block_draws,
     block_length,
     centred_interval,
+    dm_test,
     gap_test,
     max_t_pvalue,
     noise_ar1,
@@ -62,8 +63,9 @@ RULE_TEXT = (
     "Bonferroni-combined over test x signal, has p < alpha; (2) the effect with the lowest held-out score "
     "beats `none` on the held-out samples: a fixed-design paired test whose variance is the instruments' "
     "AR(1) noise projected on the two predictions' difference, max-T corrected over all effect candidates "
-    "(p < alpha); (3) it beats the `recalibrate_base` control the same way (max-T over the effects, p < alpha), "
-    "else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does not beat "
+    "(p < alpha); (3) it beats the `recalibrate_base` control the same way (max-T over the effects, p < alpha) and also by "
+    "a Diebold-Mariano test (Newey-West variance, bandwidth >= 2 correlation times of the loss differential, "
+    "p < alpha), else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
     "itself passes (2)-(3); (5) its held-out gap shrink is at least 10%. Otherwise `none`, with the reason. "
     "Confidence: 1 - (largest corrected p-value the named effect had to pass); for `none`, the smallest such "
@@ -230,6 +232,10 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
         if pn >= alpha:
             return False, pn, f"{e} does not beat the base model on held-out data (paired test, max-T p = {pn:.2g} ≥ {alpha:.2g})"
         pr = p_of(e, RECALIBRATE, effects)
+        if pr is not None:  # and by the random-design test: a control the fit did not tune well is not beaten
+            key = f"{e} vs {RECALIBRATE} (Diebold-Mariano)"
+            tests[key] = dm_test(ev["ws_held"][e], ev["ws_held"][RECALIBRATE])["p"]
+            pr = max(pr, tests[key])
         if pr is not None and pr >= alpha:
             return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ "
                                         f"{alpha:.2g}): a gap that tuning closes")
