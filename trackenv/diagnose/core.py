@@ -47,7 +47,7 @@ from .stats import (
     max_t_pvalue,
     noise_ar1,
     paired_covariance,
-    paired_terms,
+    paired_statistic,
     paired_test,
 )
 
@@ -196,8 +196,7 @@ def family_pvalue(ev: dict, chosen: str, ref: str, family: list[str]) -> float:
     for n in dict.fromkeys([*family, chosen]):
         if n == ref:
             continue
-        D, tm = paired_terms(ev["err_held"][n], ev["err_held"][ref], ev["noise"], ev["weights"])
-        V = paired_covariance(tm, tm)
+        D, V, tm = paired_statistic(ev["err_held"][n], ev["err_held"][ref], ev["noise"], ev["weights"])
         if V > 0 and np.isfinite(V):
             zs[n], terms[n] = D / np.sqrt(V), (tm, V)
     if chosen not in zs:

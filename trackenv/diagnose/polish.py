@@ -91,7 +91,6 @@ class _Problem:
                 self.coef.append(np.sqrt(c))
                 self.sigs.append((j, s))
         self.windows = np.array([0.0 if w is None else float(w) for w in windows])
-        self._fn = self._value_and_jac  # eager: the simulation inside is one jitted call whose JVP jax caches by shape
 
     def _predict(self, z):
         """z (R, p), row r a point of fold r mod F -> {(j, sig): (R, K_j)} predictions at the logs' sample times."""
@@ -160,7 +159,8 @@ class _Problem:
         return R[0], J, pred
 
     def __call__(self, z, jacobian: str = "secant"):
-        fn = self._value_and_secant if jacobian == "secant" else self._fn
+        # eager: the simulation inside is one jitted call whose JVP jax caches by shape
+        fn = self._value_and_secant if jacobian == "secant" else self._value_and_jac
         r, J, pred = fn(jnp.asarray(z, jnp.float32))
         return np.asarray(r, np.float64), np.asarray(J, np.float64), pred
 

@@ -146,19 +146,23 @@ def paired_terms(err_a: list, err_b: list, noise: list, weights: list) -> tuple[
     return D, terms
 
 
+def paired_statistic(err_a: list, err_b: list, noise: list, weights: list) -> tuple[float, float, list]:
+    """(D, V, terms) of "A beats B": D and its noise variance V (:func:`paired_covariance`) on the terms of
+    :func:`paired_terms`. V = 0 (undecidable) where a channel's noise level is not positive."""
+    D, terms = paired_terms(err_a, err_b, noise, weights)
+    if any(not (np.isfinite(sigma) and sigma > 0) for _, sigma, _, _ in terms):
+        return D, 0.0, terms
+    return D, paired_covariance(terms, terms), terms
+
+
 def paired_test(err_a: list, err_b: list, noise: list, weights: list) -> dict:
     """Does A predict the held-out samples better than B beyond the noise? {"z", "p" (one-sided), "diff"}.
 
     Arguments as :func:`paired_terms`. A channel whose noise level is not positive cannot be tested and
     makes the comparison undecidable (p = 1).
     """
-    D, terms = paired_terms(err_a, err_b, noise, weights)
-    V = 0.0
-    for _, sigma, rho, cd in terms:
-        if not (np.isfinite(sigma) and sigma > 0):
-            return {"z": 0.0, "p": 1.0, "diff": D}
-        V += 4.0 * sigma**2 * ar1_form(cd, cd, rho)
-    if not V > 0:
+    D, V, _ = paired_statistic(err_a, err_b, noise, weights)
+    if not (V > 0 and np.isfinite(V)):
         return {"z": 0.0, "p": 1.0, "diff": D}
     z = D / math.sqrt(V)
     return {"z": float(z), "p": float(norm.sf(z)), "diff": float(D)}
