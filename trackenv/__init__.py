@@ -2,7 +2,7 @@
 
 Public API (see README):
     load_params, replace, list_terrains  -- parameters as immutable pytrees (configs/)
-    VoltageProfile, simulate, Trajectory -- trajectories and instrument channels
+    VoltageProfile, SpeedProfile, simulate, Trajectory -- trajectories and instrument channels
     SimulationDiverged                   -- raised when a simulation goes non-finite
 """
 
@@ -12,11 +12,11 @@ configure_host_devices()  # one XLA CPU device per core for split batches, befor
 
 from .params import ConfigError, Params, list_terrains, list_vehicles, load_params, replace
 from .physics.model import State, initial_state
-from .simulate import SimulationDiverged, Trajectory, VoltageProfile, simulate
+from .simulate import SimulationDiverged, SpeedProfile, Trajectory, VoltageProfile, simulate
 
 __all__ = [
     "ConfigError", "Params", "load_params", "list_terrains", "list_vehicles", "replace",
-    "State", "initial_state", "SimulationDiverged", "Trajectory", "VoltageProfile", "simulate",
+    "State", "initial_state", "SimulationDiverged", "SpeedProfile", "Trajectory", "VoltageProfile", "simulate",
 ]
 __version__ = "0.1.0"
 

@@ -20,6 +20,13 @@ and this module is where that way is written down:
 - **Errors.** ``sim − meas`` per channel; heading errors wrapped into (−π, π] (:func:`wrap_angle`,
   :func:`channel_error`); a measured heading is unwrapped over its present samples before its range
   is taken (:func:`unwrap_measured`).
+- **Drive input.** A log drives the model by its voltages (voltage mode) or by its measured sprocket or
+  track speeds (speed mode, :attr:`trackenv.fieldlog.FieldLog.input_mode`). :func:`log_drive` gives
+  the drive as ``(kind, values)``, track speeds converted to sprocket speeds ω = V_t / r_s' with the
+  belt radius of the simulated vehicle on the simulated terrain; :func:`drive_profile` turns that into
+  the :class:`~trackenv.simulate.VoltageProfile` or :class:`~trackenv.simulate.SpeedProfile` that
+  :func:`trackenv.simulate.simulate` takes. In speed mode the encoder channel ``speed_ideal`` is the
+  input itself and is not compared (:data:`INPUT_CHANNELS`).
 - **Records.** :func:`json_clean` makes a nested result JSON-safe (NaN/inf -> ``None``, numpy scalars
   -> Python); :func:`stack_trees` stacks parameter pytrees along a new last (vehicle) axis, the batch
   layout of :func:`trackenv.simulate.simulate_batch` (docs/model.md §6).
@@ -41,11 +48,12 @@ import numpy as np
 __all__ = [
     "CURRENTS", "POSE", "SampleWeights", "grid_weights", "at_samples", "interp_at", "rectify",
     "rectify_channels", "pose_to_log_frame", "pose_from_log_frame", "wrap_angle", "channel_error",
-    "unwrap_measured", "json_clean", "stack_trees",
+    "unwrap_measured", "json_clean", "stack_trees", "log_drive", "drive_profile", "INPUT_CHANNELS",
 ]
 
 CURRENTS = ("i_left", "i_right")  # the channels an absolute ammeter rectifies
 POSE = ("x", "y", "heading")  # the channels moved into the log's frame
+INPUT_CHANNELS = {"voltage": (), "speed": ("speed_ideal",)}  # channels that are the drive input, per mode
 
 
 def _is_jax(x) -> bool:
@@ -168,3 +176,29 @@ def stack_trees(trees, dtype=None):
     cast = (lambda x: x) if dtype is None else (lambda x: jnp.asarray(x, dtype))  # noqa: E731
     return jax.tree.map(lambda *xs: jnp.stack([cast(x) for x in xs], axis=-1)
                         if eqx.is_inexact_array_like(xs[0]) else xs[0], *trees)
+
+
+def log_drive(log, params) -> tuple[str, np.ndarray]:
+    """A field log's drive input: ``("voltage", V (K, 2) [V])`` or ``("speed", omega (K, 2) [rad/s])``.
+
+    Speed-mode logs with ``track_speed_*`` columns [m/s] are converted with the belt radius r_s' of
+    ``params``'s vehicle on its terrain (:func:`trackenv.physics.geometry.belt_radius`), the radius the
+    model's belt speed V_t = r_s' omega uses; ``omega_*`` columns are taken as they are.
+    """
+    if getattr(log, "input_mode", "voltage") == "voltage":
+        return "voltage", np.asarray(log.volts, np.float64)
+    from .physics.geometry import belt_radius  # noqa: PLC0415
+
+    kind, values = log.speed_input
+    values = np.asarray(values, np.float64)
+    if kind == "track_speed":
+        values = values / float(np.asarray(belt_radius(params.vehicle, params.terrain)))
+    return "speed", values
+
+
+def drive_profile(kind: str, t, values, dtype, source: str = "profile"):
+    """The simulator's profile for a drive input: a ``VoltageProfile`` or a ``SpeedProfile`` (validated)."""
+    from .simulate import SpeedProfile, VoltageProfile  # noqa: PLC0415
+
+    cls = SpeedProfile if kind == "speed" else VoltageProfile
+    return cls.from_arrays(t, values, dtype=dtype, source=source)

@@ -21,6 +21,7 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -133,12 +134,25 @@ def diagonal_damping(
     return jnp.maximum(lam_w, 0.0), jnp.maximum(lam_vel, 0.0)
 
 
+def _with_omega(state: State, omega: Float[Array, " 2 *b"]) -> State:
+    return eqx.tree_at(lambda s: s.omega, state, omega)
+
+
 def etdrk4_substep(
-    state: State, volts3: Float[Array, " 3 2 *b"], params: Params, h: Float[ArrayLike, ""], current: Coeffs
+    state: State, volts3: Float[Array, " 3 2 *b"], params: Params, h: Float[ArrayLike, ""], current: Coeffs,
+    omega3: Float[Array, " 3 2 *b"] | None = None,
 ) -> State:
-    """One ETDRK4 substep of length ``h`` [s]; ``volts3`` (3, 2, *b) holds V at t, t+h/2, t+h."""
+    """One ETDRK4 substep of length ``h`` [s]; ``volts3`` (3, 2, *b) holds V at t, t+h/2, t+h.
+
+    With ``omega3`` (3, 2, *b), the sprocket speeds at t, t+h/2, t+h [rad/s], the drive is *speed
+    prescribed*: omega is set to those values at every stage instead of being integrated from (4.1),
+    ``volts3`` is ignored, and the motor current is left unchanged (it follows algebraically from the
+    torque balance, :func:`trackenv.physics.model.prescribed_speed_current`).
+    """
+    if omega3 is not None:
+        state = _with_omega(state, omega3[0])
     ev = evaluate(state, volts3[0], params)
-    omega_mid = state.omega + 0.5 * h * ev.drive.omega
+    omega_mid = state.omega + 0.5 * h * ev.drive.omega if omega3 is None else omega3[1]
     _, lam_z, lam_x = decay_rates(params, ev.kin, ev.kin.belt_radius * omega_mid)
     lam_w, lam_vel = jax.lax.stop_gradient(diagonal_damping(params, state, ev))
     c = _tree_coeffs(state, current, etd_coeffs(lam_z, h), etd_coeffs(lam_x, h),
@@ -155,16 +169,20 @@ def etdrk4_substep(
 
     y0 = _map(lambda k, u, s: u - s, c, state, shift)
     n_u = drive(state, ev)
-    a = _map(lambda k, s, y, n: s + k.E2 * y + k.Q * n, c, shift, y0, n_u)
+    pin = (lambda x, i: x) if omega3 is None else (lambda x, i: _with_omega(x, omega3[i]))  # noqa: E731
+    a = pin(_map(lambda k, s, y, n: s + k.E2 * y + k.Q * n, c, shift, y0, n_u), 1)
     n_a = drive(a, evaluate(a, volts3[1], params))
-    b = _map(lambda k, s, y, n: s + k.E2 * y + k.Q * n, c, shift, y0, n_a)
+    b = pin(_map(lambda k, s, y, n: s + k.E2 * y + k.Q * n, c, shift, y0, n_a), 1)
     n_b = drive(b, evaluate(b, volts3[1], params))
-    cc = _map(lambda k, s, x, nb, nu: s + k.E2 * (x - s) + k.Q * (2.0 * nb - nu), c, shift, a, n_b, n_u)
+    cc = pin(_map(lambda k, s, x, nb, nu: s + k.E2 * (x - s) + k.Q * (2.0 * nb - nu), c, shift, a, n_b, n_u), 2)
     n_c = drive(cc, evaluate(cc, volts3[2], params))
-    return _map(
+    out = _map(
         lambda k, s, y, nu, na, nb, nc: s + k.E * y + k.f1 * nu + 2.0 * k.f2 * (na + nb) + k.f3 * nc,
         c, shift, y0, n_u, n_a, n_b, n_c,
     )
+    if omega3 is None:
+        return out
+    return eqx.tree_at(lambda s: (s.omega, s.current), out, (omega3[2], state.current))
 
 
 def current_coeffs(params: Params, h: Float[ArrayLike, ""]) -> Coeffs:
@@ -173,7 +191,8 @@ def current_coeffs(params: Params, h: Float[ArrayLike, ""]) -> Coeffs:
 
 
 def advance(
-    state: State, volts: Float[Array, " n 3 2 *b"], params: Params, h: Float[ArrayLike, ""], unroll: int = 1
+    state: State, volts: Float[Array, " n 3 2 *b"], params: Params, h: Float[ArrayLike, ""], unroll: int = 1,
+    speed_prescribed: bool = False,
 ) -> State:
     """Advance ``state`` over ``volts.shape[0]`` substeps of length ``h``.
 
@@ -186,6 +205,8 @@ def advance(
     - `params`: the model parameters.
     - `h`: the substep length [s].
     - `unroll`: ``jax.lax.scan``'s unroll factor (compile time vs run time; no effect on the result).
+    - `speed_prescribed`: if true, ``volts`` holds the prescribed sprocket speeds [rad/s] instead of
+      voltages (see :func:`etdrk4_substep`).
 
     **Returns:**
 
@@ -194,6 +215,8 @@ def advance(
     cur = current_coeffs(params, h)
 
     def body(s, v3):
+        if speed_prescribed:
+            return etdrk4_substep(s, jnp.zeros_like(v3), params, h, cur, omega3=v3), None
         return etdrk4_substep(s, v3, params, h, cur), None
 
     state, _ = jax.lax.scan(body, state, volts, unroll=unroll)

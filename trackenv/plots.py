@@ -23,7 +23,7 @@ def _overlay(ax, measured: dict | None, key: str, label: str) -> None:
 
 def maneuver_figure(traj, title: str, path: Path, label: str = "simulated (base model)", measured: dict | None = None,
                     caption: str | None = None, current_sensor: str = "signed",
-                    measured_label: str = "log") -> Path:
+                    measured_label: str = "log", speed_mode: bool = False) -> Path:
     """Write a 5-panel figure of ``traj`` (a single-vehicle :class:`~trackenv.simulate.Trajectory`).
 
     Args:
@@ -33,6 +33,8 @@ def maneuver_figure(traj, title: str, path: Path, label: str = "simulated (base 
         current_sensor: ``"signed"`` plots the simulated currents as they are; ``"absolute"`` plots |i|,
             as the thesis's field ammeter reports them (use it to compare with such a log).
         measured_label: legend suffix of the measured data, e.g. ``"field log"``.
+        speed_mode: the trajectory was driven by prescribed speeds (:class:`~trackenv.simulate.SpeedProfile`):
+            panel (a) shows the voltage the drive needs, panel (c) the prescribed (input) speed.
     """
     t = np.asarray(traj.t)
     ch = {k: np.asarray(v) for k, v in traj.channels.items()}
@@ -45,7 +47,8 @@ def maneuver_figure(traj, title: str, path: Path, label: str = "simulated (base 
     ax.plot(t, volts[:, 1], "--", label="right")
     _overlay(ax, measured, "v_left", f"left ({ml} samples)")
     _overlay(ax, measured, "v_right", f"right ({ml} samples)")
-    ax.set(ylabel="motor voltage [V]", title="(a) input voltages")
+    ax.set(ylabel="motor voltage [V]",
+           title="(a) drive voltage needed (simulated, 4.2)" if speed_mode else "(a) input voltages")
     ax.legend()
     ax = fig.add_subplot(grid[0, 1])
     absolute = current_sensor == "absolute"
@@ -61,7 +64,7 @@ def maneuver_figure(traj, title: str, path: Path, label: str = "simulated (base 
     ax.plot(t, ch["speed_ideal"], label="ideal speed r_s(ω_l+ω_r)/2")
     ax.plot(t, ch["u"], ":", label="CG forward speed u")
     _overlay(ax, measured, "speed_ideal", f"ideal speed ({ml})")
-    ax.set(ylabel="speed [m/s]", title="(c) speed")
+    ax.set(ylabel="speed [m/s]", title="(c) speed (ideal speed: the prescribed input)" if speed_mode else "(c) speed")
     ax.legend()
     ax = fig.add_subplot(grid[1, 1])
     ax.plot(t, ch["yaw_rate"], label="yaw rate")

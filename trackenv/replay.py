@@ -48,9 +48,12 @@ from typing import Any, Literal
 import numpy as np
 
 from .compare import (
+    INPUT_CHANNELS,
     channel_error,
+    drive_profile,
     interp_at,
     json_clean,
+    log_drive,
     pose_from_log_frame,
     pose_to_log_frame,
     rectify_channels,
@@ -232,7 +235,8 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
     t_log = log.t
     t_offset = float(t_log[0])
     tt = t_log - t_offset
-    profile = te.VoltageProfile.from_arrays(tt, log.volts, source=str(log.folder / "log.csv"))
+    mode, drive = log_drive(log, params)
+    profile = drive_profile(mode, tt, drive, params.dtype, source=str(log.folder / "log.csv"))
     dt_sim = _grid_step(dt, substep, float(np.min(np.diff(tt))))
     n = _n_steps(float(tt[-1]), dt_sim)
     say(f"simulating {n * dt_sim:.2f} s on a {dt_sim * 1e3:g} ms grid (substep {substep * 1e3:g} ms)")
@@ -248,7 +252,9 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
     measured = log.measured()
     channels, absent = {}, []
     for col in COMPARED:
-        if col in measured:
+        if col in INPUT_CHANNELS[mode]:
+            absent.append(col)  # the drive input itself (speed mode): not a prediction
+        elif col in measured:
             channels[col] = _channel_metrics(col, sim[col], measured[col])
         else:
             absent.append(col)
@@ -256,13 +262,19 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
     say(f"writing log.csv, meta.json, metrics.json to {out}")
     out.mkdir(parents=True, exist_ok=True)
     terrain_id = terrain or log.terrain
-    cols = {"t": t_log, "v_left": log.volts[:, 0], "v_right": log.volts[:, 1]}
+    if mode == "voltage":
+        cols = {"t": t_log, "v_left": log.volts[:, 0], "v_right": log.volts[:, 1]}
+    else:  # the prescribed speeds, and the voltage the drive needs (4.2) as a simulated output
+        cols = {"t": t_log, "omega_left": drive[:, 0], "omega_right": drive[:, 1]}
+        v_sim = interp_at(tt, grid, np.asarray(traj.voltage))
+        cols.update({"v_left_sim": v_sim[:, 0], "v_right_sim": v_sim[:, 1]})
     cols.update({c: sim[c] for c in COMPARED})
     meta = {
         "terrain": terrain_id, "maneuver": log.maneuver, "current_sensor": sensor, "vehicle": log.vehicle,
         "synthetic": True, "simulated": True,
-        "source": f"trackenv replay of the field log {log.folder} (simulated with the voltages of its log.csv; "
-                  "not measured data)",
+        "source": f"trackenv replay of the field log {log.folder} (simulated with the "
+                  f"{'voltages' if mode == 'voltage' else 'measured speeds'} of its log.csv; not measured data)",
+        "input_mode": mode, "input_mode_reason": getattr(log, "input_mode_reason", "voltage columns"),
         "replay_of": str(log.folder), "replay_of_synthetic": log.synthetic,
         "internal_resistance": internal or "constant", "effects": effect_names,
         "t_offset_s": t_offset, "dt_sim_s": dt_sim, "substep_s": substep,
@@ -270,13 +282,16 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
                  "(t_offset_s) and its pose was moved into the log's frame at that sample",
     }
     log_path, meta_path = write_log_columns(out, cols, meta)
-    meas_plot = {"t": tt, "v_left": log.volts[:, 0], "v_right": log.volts[:, 1]}
+    meas_plot = {"t": tt}
+    if mode == "voltage":
+        meas_plot.update({"v_left": log.volts[:, 0], "v_right": log.volts[:, 1]})
     meas_plot.update({k: v for k, v in measured.items() if k not in ("x", "y", "heading")})
     if "x" in measured and "y" in measured:  # measured pose into the simulation's frame, for the figure
         meas_plot["x"], meas_plot["y"], _ = pose_from_log_frame(measured["x"], measured["y"], 0.0, pose0)
-    label = "log, synthetic" if log.synthetic else "field log"
+    label = "log, synthetic" if log.synthetic else ("field log, MEASURED" if log.meta.get("measured") else "field log")
     caption = (f"replay of {log.folder} ({label}, {len(log)} samples, ammeter {sensor}); simulated with "
                f"{terrain_id}, {internal or 'constant'} internal resistance"
+               + ("; driven by the log's measured speeds (speed mode)" if mode == "speed" else "")
                + (f", effects {', '.join(effect_names)}" if effect_names else ", base model")
                + (f"; time since the log's first sample (t = {t_offset:g} s)" if t_offset != 0 else ""))
     fig = None
@@ -284,11 +299,12 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
         say("drawing replay.png")
         fig = maneuver_figure(traj, f"replay of {log.folder.name} ({log.maneuver}, {terrain_id})",
                               out / "replay.png", measured=meas_plot, caption=caption, current_sensor=sensor,
-                              measured_label=label, label=_model_label(effect_names))
+                              measured_label=label, label=_model_label(effect_names), speed_mode=mode == "speed")
     metrics = {
         "source": str(log.folder), "kind": "field_log", "log_is_synthetic": log.synthetic,
         "terrain": terrain_id, "vehicle": log.vehicle, "maneuver": log.maneuver,
         "internal_resistance": internal or "constant", "effects": effect_names, "current_sensor": sensor,
+        "input_mode": mode, "log_is_measured": bool(log.meta.get("measured", False)),
         "n_samples": len(log), "t_offset_s": t_offset, "duration_s": float(tt[-1]), "dt_sim_s": dt_sim,
         "substep_s": substep, "wall_time_s": wall,
         "definition": "at the log's sample times; rmse = sqrt(mean((sim - meas)^2)); nrmse = rmse / (max - min of "

@@ -31,9 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import instruments
-from .integrate import advance, is_physical
+from .integrate import advance, is_physical, physical_bounds
 from .parallel import shard, split_count
-from .physics.model import State, initial_state
+from .physics.model import State, drive_voltage, initial_state, prescribed_speed_current
 
 DEFAULT_DT = 0.05  # s, control / output interval
 DEFAULT_SUBSTEP = 0.0005  # s, chosen by the convergence study (tests/test_convergence.py, README)
@@ -97,6 +97,58 @@ class VoltageProfile(eqx.Module):
     def __call__(self, t):
         """Voltages at times ``t`` (any shape S): returns (*S, 2, *b)."""
         return interpolate(self.t, self.volts, t)
+
+
+class SpeedProfile(eqx.Module):
+    """Prescribed sprocket (or wheel) speeds, piecewise linear in time and held beyond the ends.
+
+    t: (K,) strictly increasing times [s]; omega: (K, 2, *b) left/right sprocket speeds [rad/s].
+    Driving :func:`simulate` with a ``SpeedProfile`` instead of a :class:`VoltageProfile` replays a
+    speed-controlled vehicle: omega follows the profile exactly, the body follows from the contact
+    forces, and the motor current comes from the drive's torque balance
+    (:func:`trackenv.physics.model.prescribed_speed_current`); the trajectory's ``voltage`` is then
+    the voltage the drive must apply (``drive_voltage``).
+    """
+
+    t: jax.Array
+    omega: jax.Array
+
+    @classmethod
+    def from_arrays(cls, t, omega, dtype=jnp.float32, source: str = "speed profile") -> SpeedProfile:
+        """From times (K,) and sprocket speeds (K, 2[, *b]) [rad/s]; validated (finite, increasing times)."""
+        t = np.asarray(t, dtype=np.float64)
+        omega = np.asarray(omega, dtype=np.float64)
+        validate_speeds(t, omega, source=source)
+        if t.shape[0] == 1:
+            t = np.concatenate([t, t + 1.0])
+            omega = np.concatenate([omega, omega])
+        return cls(jnp.asarray(t, dtype), jnp.asarray(omega, dtype))
+
+    def __call__(self, t):
+        """Sprocket speeds at times ``t`` (any shape S): returns (*S, 2, *b) [rad/s]."""
+        return interpolate(self.t, self.omega, t)
+
+
+def validate_speeds(t, omega, limit: float | None = None, source: str = "speed profile") -> None:
+    """Raise ``ValueError`` naming the sample and channel for a bad speed profile; ``limit``: largest
+    |omega| [rad/s] accepted (default: none)."""
+    if t.ndim != 1 or t.shape[0] < 1:
+        raise ValueError(f"{source}: time must be a 1-D array with at least one sample, got shape {t.shape}")
+    if omega.ndim < 2 or omega.shape[0] != t.shape[0] or omega.shape[1] != 2:
+        raise ValueError(
+            f"{source}: speeds must have shape (K, 2[, batch]) with K = {t.shape[0]} samples, got {omega.shape}")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(~np.isfinite(t))[0]) if not np.all(np.isfinite(t)) else \
+            int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+        raise ValueError(f"{source}: time is not finite and strictly increasing at sample {k}")
+    for ch, name in enumerate(("omega_left", "omega_right")):
+        w = omega[:, ch]
+        bad = ~np.isfinite(w) if limit is None else ~(np.abs(w) <= limit)
+        if np.any(bad):
+            k = int(np.argwhere(bad)[0][0])
+            what = "is not finite" if limit is None or not np.isfinite(np.ravel(w[k])[0]) else \
+                f"exceeds the physical bound {limit:.1f} rad/s"
+            raise ValueError(f"{source}: speed '{name}' {what} at sample {k} (t = {t[k]} s)")
 
 
 def validate_profile(t, volts, limit: float | None = None, source: str = "profile") -> None:
@@ -173,15 +225,18 @@ def simulate_core(params, profile: VoltageProfile, state0: State, n_steps: int, 
     dtype = params.dtype
     h = dt / substeps
     nb = state0.vel.ndim - 1
-    # Voltages at every half substep, then grouped as (start, middle, end) of each substep.
+    speed_mode = isinstance(profile, SpeedProfile)
+    # Inputs (voltages or prescribed speeds) at every half substep, grouped as (start, middle, end).
     half = t0 + jnp.arange(2 * n_steps * substeps + 1, dtype=dtype) * (0.5 * h)
     v_half = profile(half)  # (M, 2, *b)
     idx = (2 * jnp.arange(n_steps * substeps))[:, None] + jnp.arange(3)[None]
     v3 = v_half[idx].reshape((n_steps, substeps, 3) + v_half.shape[1:])
+    if speed_mode:
+        state0 = eqx.tree_at(lambda s: s.omega, state0, v_half[0])
 
     def control_step(carry, v_sub):
         state, diverged, t_div, k = carry
-        new = advance(state, v_sub, params, h, unroll=unroll)
+        new = advance(state, v_sub, params, h, unroll=unroll, speed_prescribed=speed_mode)
         ok = is_physical(new, params, nb)
         newly = (~ok) & (~diverged)
         t_now = t0 + (k + 1) * dt
@@ -196,17 +251,28 @@ def simulate_core(params, profile: VoltageProfile, state0: State, n_steps: int, 
     (_, diverged, t_div, _), states = jax.lax.scan(control_step, carry0, v3)
     states = jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), state0, states)
     t = t0 + jnp.arange(n_steps + 1, dtype=dtype) * dt
+    if speed_mode:  # the current from the torque balance (4.1), the voltage from (4.2)
+        omega_rate = (profile(t + 0.5 * dt) - profile(t - 0.5 * dt)) / dt
+        current = jax.vmap(lambda s, w: prescribed_speed_current(s, w, params))(states, omega_rate)
+        states = eqx.tree_at(lambda s: s.current, states, current)
+        volts = drive_voltage(current, states.omega, params)
+    else:
+        volts = profile(t)
     chans = jax.vmap(lambda s: instruments.channels(s, params))(states)
     for effect in params.effects:
         chans = effect.instruments(chans, t, params)
-    volts = profile(t)
     return Trajectory(t, states, chans, volts, diverged, t_div)
 
 
 _simulate_jit = jax.jit(simulate_core, static_argnames=("n_steps", "dt", "substeps", "t0", "unroll"))
 
 
-def simulate_batch(params, profile: VoltageProfile, n_steps: int, dt: float, substeps: int,
+def profile_values(profile: VoltageProfile | SpeedProfile) -> jax.Array:
+    """The samples of a drive profile: ``volts`` [V] or ``omega`` [rad/s], (K, 2, *b)."""
+    return profile.omega if isinstance(profile, SpeedProfile) else profile.volts
+
+
+def simulate_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int, dt: float, substeps: int,
                    initial: State | None = None, *, t0: float = 0.0, unroll: int = 1) -> Trajectory:
     """The compiled simulation core on a batch of vehicles, without :func:`simulate`'s checks.
 
@@ -218,12 +284,13 @@ def simulate_batch(params, profile: VoltageProfile, n_steps: int, dt: float, sub
         params: :class:`trackenv.params.Params` whose floating leaves are scalars or (*b) arrays, the
             vehicles on the last axis (:func:`trackenv.compare.stack_trees` stacks per-vehicle parameters);
             its dtype sets the precision.
-        profile: :class:`VoltageProfile` with ``t`` (K,) and ``volts`` (K, 2, *b) in ``params``'s dtype.
+        profile: :class:`VoltageProfile` with ``t`` (K,) and ``volts`` (K, 2, *b) in ``params``'s dtype, or a
+            :class:`SpeedProfile` (``omega`` (K, 2, *b)) for a speed-prescribed drive.
         n_steps: number of output steps (static).
         dt: output interval [s] (static).
         substeps: integration substeps per output step (static; :func:`n_substeps` from a largest substep).
         initial: initial :class:`State` with batch shape *b (default: at rest at the origin, heading 0,
-            batch shape ``profile.volts.shape[2:]``).
+            batch shape ``profile_values(profile).shape[2:]``).
         t0: time of the first sample [s] (static).
         unroll: scan unrolling of the substeps (static).
 
@@ -232,14 +299,14 @@ def simulate_batch(params, profile: VoltageProfile, n_steps: int, dt: float, sub
         (T, 2, *b), ``diverged`` and ``t_diverged`` (*b).
     """
     if initial is None:
-        initial = initial_state(params, tuple(profile.volts.shape[2:]))
+        initial = initial_state(params, tuple(profile_values(profile).shape[2:]))
     return _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps, t0=t0,
                          unroll=unroll)
 
 
 def simulate(
     params,
-    profile: VoltageProfile,
+    profile: VoltageProfile | SpeedProfile,
     t_end: float,
     *,
     dt: float = DEFAULT_DT,
@@ -251,7 +318,8 @@ def simulate(
 
     Args:
         params: :class:`trackenv.params.Params` (``load_params``); its dtype sets the precision.
-        profile: a :class:`VoltageProfile` (voltages linear between samples, evaluated at every RK stage).
+        profile: a :class:`VoltageProfile` (voltages linear between samples, evaluated at every RK stage), or
+            a :class:`SpeedProfile` (sprocket speeds prescribed; current and voltage follow, see there).
         t_end: simulated duration [s]; a multiple of ``dt``.
         dt: output interval [s] (default 0.05 s, the environments' control step).
         substep: largest integration substep [s] (default 0.5 ms, from the convergence study); at most
@@ -274,21 +342,26 @@ def simulate(
         raise ValueError(f"t_end = {t_end} s is not a whole number of output steps dt = {dt} s")
     if on_divergence not in ("raise", "flag"):
         raise ValueError(f"on_divergence must be 'raise' or 'flag', got {on_divergence!r}")
-    if not isinstance(profile, VoltageProfile):
-        raise TypeError(f"profile must be a trackenv.VoltageProfile, got {type(profile).__name__}")
+    if not isinstance(profile, (VoltageProfile, SpeedProfile)):
+        raise TypeError(f"profile must be a trackenv.VoltageProfile or SpeedProfile, got {type(profile).__name__}")
+    kind = type(profile)
     if not isinstance(profile.t, jax.core.Tracer):
-        limit = float(np.max(np.asarray(params.vehicle.voltage_limit)))
-        validate_profile(np.asarray(profile.t, np.float64), np.asarray(profile.volts, np.float64), limit)
+        t_np, x_np = np.asarray(profile.t, np.float64), np.asarray(profile_values(profile), np.float64)
+        if kind is VoltageProfile:
+            validate_profile(t_np, x_np, float(np.max(np.asarray(params.vehicle.voltage_limit))))
+        else:
+            validate_speeds(t_np, x_np, float(np.min(np.asarray(physical_bounds(params)[1]))))
     dtype = params.dtype
-    profile = VoltageProfile(jnp.asarray(profile.t, dtype), jnp.asarray(profile.volts, dtype))
-    batch = profile.volts.shape[2:]
+    profile = kind(jnp.asarray(profile.t, dtype), jnp.asarray(profile_values(profile), dtype))
+    batch = profile_values(profile).shape[2:]
     if initial is None:
         initial = initial_state(params, batch)
     substeps = n_substeps(dt, substep)
     if len(batch) == 1 and split_count(batch[0]) > 1:  # both cores: the vehicle axis split (parallel.py)
         params, profile, initial = shard((params, profile, initial), batch[0], axis=-1)
-        profile = VoltageProfile(jax.device_put(profile.t, jax.sharding.NamedSharding(
-            profile.volts.sharding.mesh, jax.sharding.PartitionSpec())), profile.volts)
+        values = profile_values(profile)
+        profile = kind(jax.device_put(profile.t, jax.sharding.NamedSharding(
+            values.sharding.mesh, jax.sharding.PartitionSpec())), values)
     traj = simulate_batch(params, profile, n_steps, dt, substeps, initial)
     if on_divergence == "raise" and not isinstance(traj.diverged, jax.core.Tracer):
         div = np.asarray(traj.diverged)

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..compare import POSE, SampleWeights, at_samples, grid_weights, pose_to_log_frame, rectify, stack_trees
 from ..params import load_params
-from ..simulate import VoltageProfile, simulate_batch
+from ..simulate import SpeedProfile, VoltageProfile, simulate_batch
 from .candidates import Candidate
 from .data import TestData
 
@@ -38,8 +38,15 @@ class Bucket:
     n_steps: int
     dt: float
     substeps: int
-    grid_t: np.ndarray  # voltage grid [s]
-    volts: np.ndarray  # (G, 2, n_tests_in_bucket)
+    grid_t: np.ndarray  # drive-input grid [s]
+    volts: np.ndarray  # (G, 2, n_tests_in_bucket): voltages [V], or sprocket speeds [rad/s] if kind is "speed"
+    kind: str = "voltage"  # the tests' input mode (a bucket never mixes modes)
+
+    def profile(self, repeat: int, dtype):
+        """The bucket's drive profile, each test repeated ``repeat`` times on the vehicle axis."""
+        values = jnp.asarray(np.repeat(self.volts, repeat, axis=-1), dtype)
+        cls = SpeedProfile if self.kind == "speed" else VoltageProfile
+        return cls(jnp.asarray(self.grid_t, dtype), values)
 
 
 def _grid_dt(tests: list[TestData], substep: float) -> float:
@@ -56,12 +63,13 @@ def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP, pad_s: flo
     diagnoses of equally many tests (a benchmark) reuses the compiled programs."""
     dt = _grid_dt(tests, substep) if pad_s is None else max(1, int(round(0.02 / substep))) * substep
     substeps = max(1, int(round(dt / substep)))
-    order = sorted(range(len(tests)), key=lambda j: -tests[j].duration)
+    order = sorted(range(len(tests)), key=lambda j: (tests[j].drive_kind, -tests[j].duration))
     groups: list[list[int]] = []
     for j in order:
-        if pad_s is not None and groups:
+        same_kind = bool(groups) and tests[groups[-1][0]].drive_kind == tests[j].drive_kind
+        if pad_s is not None and same_kind:
             groups[-1].append(j)
-        elif groups and tests[j].duration >= 0.5 * tests[groups[-1][0]].duration:
+        elif same_kind and tests[j].duration >= 0.5 * tests[groups[-1][0]].duration:
             groups[-1].append(j)
         else:
             groups.append([j])
@@ -74,10 +82,10 @@ def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP, pad_s: flo
         n_steps = int(math.ceil(t_end / dt - 1e-9)) + 1
         hv = min(0.01, min(float(np.min(np.diff(tests[j].t))) for j in g)) if pad_s is None else 0.01
         grid = np.arange(int(math.ceil(n_steps * dt / hv)) + 2) * hv
-        volts = np.stack([np.stack([np.interp(grid, tests[j].t, tests[j].volts[:, c]) for c in range(2)], 0)
+        volts = np.stack([np.stack([np.interp(grid, tests[j].t, tests[j].drive_values[:, c]) for c in range(2)], 0)
                           for j in g], -1)  # (2, G, nb) -> transpose
         volts = np.transpose(volts, (1, 0, 2))
-        buckets.append(Bucket(tuple(g), n_steps, dt, substeps, grid, volts))
+        buckets.append(Bucket(tuple(g), n_steps, dt, substeps, grid, volts, tests[g[0]].drive_kind))
     return buckets
 
 
@@ -108,14 +116,16 @@ class BatchSimulator:
     """Simulates candidates' parameter sets on every test; returns predictions at the logs' sample times."""
 
     def __init__(self, tests: list[TestData], internal_resistance: str = "constant", substep: float = FIT_SUBSTEP,
-                 pad_s: float | None = None):
+                 pad_s: float | None = None, vehicle=None):
         self.tests = tests
+        self.vehicle = vehicle  # a vehicle id or YAML path replacing each log's meta.json vehicle (None: the log's)
         self.substep = substep
         self.internal_resistance = internal_resistance
         self.buckets = make_buckets(tests, substep, pad_s)
-        self.base = [load_params(t.terrain, vehicle=t.vehicle, internal_resistance=internal_resistance) for t in tests]
+        self.base = [load_params(t.terrain, vehicle=vehicle or t.vehicle, internal_resistance=internal_resistance)
+                     for t in tests]
         self.b_int_constant = np.array(
-            [float(load_params(t.terrain, vehicle=t.vehicle, internal_resistance="constant").internal.constant)
+            [float(load_params(t.terrain, vehicle=vehicle or t.vehicle, internal_resistance="constant").internal.constant)
              for t in tests])
         self.n_vehicle_seconds = 0.0
         self._base_channels = {}  # bucket index -> raw base-model channels on the output grid (T, nb)
@@ -184,8 +194,7 @@ class BatchSimulator:
 
     def _simulate(self, b: Bucket, params, n_vehicles: int) -> tuple[dict, np.ndarray]:
         """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,)."""
-        volts = np.repeat(b.volts, n_vehicles // len(b.tests), axis=-1)
-        prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
+        prof = b.profile(n_vehicles // len(b.tests), params.dtype)
         traj = simulate_batch(params, prof, b.n_steps, b.dt, b.substeps)  # starts at rest, (n_vehicles,) batch
         self.n_vehicle_seconds += n_vehicles * b.n_steps * b.dt
         return {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}, np.asarray(traj.diverged)

@@ -371,7 +371,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
              internal_resistance: str = "constant", candidates: list[str] | None = None, substep: float = FIT_SUBSTEP,
              seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
              progress: bool = True, pad_s: float | None = None, cache: str | Path | None = None,
-             jacobian: str = "secant") -> Diagnosis:
+             jacobian: str = "secant", vehicle: str | Path | None = None) -> Diagnosis:
     """Diagnose the gap between the simulator and the field tests in ``folder`` (one sub-folder per test).
 
     Args:
@@ -388,6 +388,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         jacobian: the polish's Jacobian, ``"secant"`` (central differences, batched) or ``"forward"``
             (``jax.jacfwd``); see :mod:`.polish`.
         figures: draw the PNGs. progress: show a progress bar on stderr.
+        vehicle: a vehicle id or YAML path used for every test instead of its ``meta.json`` vehicle (e.g. a
+            vehicle calibrated on other runs, :mod:`trackenv.calibrate`).
 
     Raises:
         DiagnosisError: nothing usable in ``folder``, or a bad option.
@@ -407,7 +409,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         if unknown:
             raise DiagnosisError(f"unknown candidate(s) {', '.join(unknown)}; known: {', '.join(names)}")
         all_cands = [c for c in all_cands if c.name in candidates or c.name == NONE]
-    sim = BatchSimulator(data, internal_resistance, substep, pad_s=pad_s)
+    sim = BatchSimulator(data, internal_resistance, substep, pad_s=pad_s, vehicle=vehicle)
     deformable = [float(b.terrain.deformable) > 0.5 for b in sim.base]
     skipped = {}
     cands = []

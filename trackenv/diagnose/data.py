@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..compare import unwrap_measured
+from ..compare import INPUT_CHANNELS, log_drive, unwrap_measured
 from ..fieldlog import MEASURED_COLUMNS, OPTIONAL_COLUMNS, FieldLog, FieldLogError, read_field_log
 from .phases import segment_phases
 
@@ -48,7 +48,7 @@ class TestData:
     folder: Path
     log: FieldLog
     t: np.ndarray  # (K,) s
-    volts: np.ndarray  # (K, 2) V
+    volts: np.ndarray  # (K, 2) V; in speed mode the back-emf equivalent alpha_v omega (phases, figures)
     measured: dict  # signal -> (K,) with NaN where missing
     phase: np.ndarray  # (K,) phase labels
     noise: dict  # signal -> σ (same unit as the signal)
@@ -57,6 +57,8 @@ class TestData:
     pose0: tuple
     notes: list = field(default_factory=list)
     fit_mask: np.ndarray | None = None  # (K,) samples that enter fits and verdicts (see COAST_KEEP)
+    drive_kind: str = "voltage"  # "voltage" or "speed" (the log's input mode)
+    drive: np.ndarray | None = None  # (K, 2) the drive input: V, or prescribed sprocket speeds [rad/s]
 
     @property
     def terrain(self) -> str:
@@ -69,6 +71,11 @@ class TestData:
     @property
     def sensor(self) -> str:
         return self.log.current_sensor
+
+    @property
+    def drive_values(self) -> np.ndarray:
+        """The drive input (K, 2): voltages [V] in voltage mode, sprocket speeds [rad/s] in speed mode."""
+        return self.volts if self.drive is None else self.drive
 
     @property
     def duration(self) -> float:
@@ -105,12 +112,15 @@ def prepare_test(log: FieldLog, name: str) -> TestData:
     t = t_raw - t_raw[0]
     if t[-1] < MIN_DURATION:
         raise DiagnosisError(f"{log.folder / 'log.csv'}: lasts {t[-1]:.3g} s (at least {MIN_DURATION:g} s needed)")
-    volts = log.volts
+    kind, drive, volts = _drive(log)
     if not np.all(np.isfinite(volts)):  # read_field_log rejects these already; belt and braces
         k = int(np.argwhere(~np.isfinite(volts))[0][0])
         raise DiagnosisError(f"{log.folder / 'log.csv'}: voltage missing at data row {k + 1}")
     notes, measured, noise, span = [], {}, {}, {}
     for sig, x in log.measured().items():
+        if sig in INPUT_CHANNELS[kind]:
+            notes.append(f"{sig} not compared: it is the drive input (speed mode: {log.input_mode_reason})")
+            continue
         present = np.isfinite(x)
         if present.mean() < MIN_PRESENT:
             notes.append(f"{sig} excluded: only {100 * present.mean():.0f}% of its samples are present")
@@ -136,7 +146,20 @@ def prepare_test(log: FieldLog, name: str) -> TestData:
     phase = segment_phases(t, volts)
     return TestData(name=name, folder=log.folder, log=log, t=t, volts=volts, measured=measured,
                     phase=phase, noise=noise, span=span, t_offset=float(t_raw[0]),
-                    pose0=log.first_pose(), notes=notes, fit_mask=fit_mask(t, phase))
+                    pose0=log.first_pose(), notes=notes, fit_mask=fit_mask(t, phase), drive_kind=kind,
+                    drive=drive)
+
+
+def _drive(log: FieldLog) -> tuple[str, np.ndarray, np.ndarray]:
+    """(kind, drive input, voltage-like series for the phases): in speed mode the phases are cut on the
+    back-emf voltage alpha_v omega, which has the voltage's scale and zero where the drive is at rest."""
+    if getattr(log, "input_mode", "voltage") == "voltage":
+        return "voltage", log.volts, log.volts
+    from ..params import load_params  # noqa: PLC0415
+
+    params = load_params(log.terrain, vehicle=log.vehicle)
+    kind, omega = log_drive(log, params)
+    return kind, omega, omega * float(params.vehicle.alpha_v)
 
 
 def fit_mask(t: np.ndarray, phase: np.ndarray) -> np.ndarray:

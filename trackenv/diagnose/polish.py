@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..compare import POSE, stack_trees, wrap_angle
-from ..simulate import VoltageProfile, simulate_batch
+from ..simulate import simulate_batch
 from .batch import predictions_at_log
 from .candidates import Candidate
 from .metrics import signal_weight
@@ -114,8 +114,7 @@ class _Problem:
                 for eff in params.effects:
                     ch = eff.instruments(ch, t, params)
             else:
-                volts = np.repeat(b.volts, F, axis=-1)
-                prof = VoltageProfile(jnp.asarray(b.grid_t, params.dtype), jnp.asarray(volts, params.dtype))
+                prof = b.profile(F, params.dtype)
                 traj = simulate_batch(params, prof, b.n_steps, b.dt, b.substeps)  # (nb * F,) vehicles
                 ch = dict(traj.channels)
                 if np.any(windows > 0):

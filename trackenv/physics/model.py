@@ -250,3 +250,27 @@ def power_balance(state: State, voltage: Float[Array, " 2 *b"], params: Params) 
         external=external,
         stored=stored,
     )
+
+
+def prescribed_speed_current(
+    state: State, omega_rate: Float[Array, " 2 *b"], params: Params
+) -> Float[Array, " 2 *b"]:
+    """Motor current [A] that drives the sprockets along a prescribed speed: (4.1) solved for i.
+
+    alpha i = J_eff domega/dt + b_eff omega + tau_stick sgn(omega) + tau_int + tau_back (+ the effects'
+    sprocket torques), with omega and the shear state taken from ``state`` and ``omega_rate``
+    [rad/s^2] the prescribed acceleration. This is the current of a speed-controlled drive (a log of
+    measured track or wheel speeds, docs/model.md §9) that holds exactly that speed.
+    """
+    veh = params.vehicle
+    ev = evaluate(state, jnp.zeros_like(state.omega), params)
+    load = motor.friction_torque(veh, state.omega) + ev.tau_int + ev.tau_back + ev.forces.sprocket
+    return (veh.drive_inertia * omega_rate + load) / veh.alpha
+
+
+def drive_voltage(current: Float[Array, " 2 *b"], omega: Float[Array, " 2 *b"], params: Params) -> Float[Array, " 2 *b"]:
+    """Motor voltage V = R_m i + alpha_v omega [V] (4.2 at di/dt = 0): the voltage a speed-controlled
+    drive applies; L_m di/dt is left out (L_m/R_m = 0.25 ms for the PackBot, far below a log's sample
+    interval)."""
+    veh = params.vehicle
+    return veh.motor_resistance * current + veh.alpha_v * omega
