@@ -7,20 +7,40 @@
 
 ``log.csv``: a header row, then one row per sample (any rate, regular or not). Columns (SI):
 
-=============== ======== =========================================================================
-column          unit     rule
-=============== ======== =========================================================================
-``t``           s        required; every row; strictly increasing (no duplicates); need not start at 0
-``v_left``      V        required; every row (the replay input); \\|V\\| <= the vehicle's bus limit (24 V)
-``v_right``     V        as ``v_left``
-``i_left``      A        required in the header; empty cells are missing samples; >= 0 if the
-                         ammeter is ``absolute``
-``i_right``     A        as ``i_left``
-``speed_ideal`` m/s      required in the header; empty cells allowed (encoder r_s (ω_l+ω_r)/2)
-``yaw_rate``    rad/s    required in the header; empty cells allowed (gyro)
-``x``, ``y``    m        optional; empty cells allowed
-``heading``     rad      optional; empty cells allowed
-=============== ======== =========================================================================
+===================== ======== ===================================================================
+column                unit     rule
+===================== ======== ===================================================================
+``t``                 s        required; every row; strictly increasing (no duplicates); need not start at 0
+``v_left``            V        the voltage input pair (with ``v_right``); every row (the replay input);
+                               \\|V\\| <= the vehicle's bus limit (24 V)
+``v_right``           V        as ``v_left``
+``omega_left``        rad/s    a speed input pair (with ``omega_right``): sprocket/wheel speed; every row
+``omega_right``       rad/s    as ``omega_left``
+``track_speed_left``  m/s      a speed input pair (with ``track_speed_right``): track or wheel surface
+                               speed; every row
+``track_speed_right`` m/s      as ``track_speed_left``
+``i_left``            A        required in the header; empty cells are missing samples; >= 0 if the
+                               ammeter is ``absolute``
+``i_right``           A        as ``i_left``
+``speed_ideal``       m/s      required in the header of a voltage log, optional in a speed log; empty
+                               cells allowed (encoder r_s (ω_l+ω_r)/2)
+``yaw_rate``          rad/s    required in the header; empty cells allowed (gyro)
+``x``, ``y``          m        optional; empty cells allowed
+``heading``           rad      optional; empty cells allowed
+===================== ======== ===================================================================
+
+**Input mode.** A log gives exactly one input pair: the voltages ``v_left``/``v_right`` (*voltage
+mode*, :attr:`FieldLog.input_mode` ``"voltage"``, the input of :func:`trackenv.replay.replay`) or,
+when no voltage column is in the header, one speed pair, ``omega_left``/``omega_right`` or
+``track_speed_left``/``track_speed_right`` (*speed mode*, ``"speed"``: a vehicle under its own
+closed-loop wheel-speed control, whose voltages were not logged; :attr:`FieldLog.speed_input`). A
+header with ``v_left`` but not ``v_right`` (or the reverse) is an error; so is, in a log without
+voltage columns, half a speed pair, or both speed pairs (which one would be the input is ambiguous). The input pair must be filled on every
+row with finite numbers. In speed mode ``speed_ideal`` may be absent from the header: it is the
+mean of the input speeds (r_s (ω_l+ω_r)/2), not an independent measurement. A voltage log may
+carry speed columns too: it stays in voltage mode and they are measurements (numbers, empty cells
+allowed), read with :meth:`FieldLog.speeds`. :attr:`FieldLog.volts` raises :class:`FieldLogError`
+on a speed-mode log (there are no voltages to replay).
 
 A measurement column may be entirely empty (a channel that was not logged), but it must be in the
 header, so that a missing channel is a decision and never a typo. Empty cells, ``nan``, ``NA`` and
@@ -31,8 +51,12 @@ otherwise ignored. Blank lines are skipped. At least 2 samples.
 ``maneuver`` (required; ``go_stop`` | ``j_turn`` | ``lane_change`` | ``zero_radius_turn`` or free
 text), ``current_sensor`` (required; ``"absolute"``, the thesis's ammeter that reports \\|i\\|, or
 ``"signed"``), ``vehicle`` (optional, default ``packbot``; an id of ``configs/vehicle``), ``notes``
-(optional text). Further keys are allowed, kept in :attr:`FieldLog.meta` and ignored. Logs written
-from a simulation carry ``"synthetic": true`` and a ``"source"``.
+(optional text), ``measured`` (optional bool: ``true`` for data recorded on a real vehicle; never
+together with ``"synthetic": true``), ``sensors`` (optional object: one entry per channel, usually
+a column name, each an object whose optional numbers ``rate_hz`` [Hz], ``quantisation`` and
+``resolution`` [the channel's unit] are > 0; other entries are kept), ``data`` (optional text
+label, e.g. ``"MEASURED"``). Further keys are allowed, kept in :attr:`FieldLog.meta` and ignored.
+Logs written from a simulation carry ``"synthetic": true`` and a ``"source"``.
 
 Every error is a :class:`FieldLogError` (a ``ValueError``) whose message names the file, and for
 ``log.csv`` the column and the row as ``line L (data row R)``: L is the 1-based line number of the
@@ -65,7 +89,12 @@ __all__ = [
     "MEASURED_COLUMNS",
     "OPTIONAL_COLUMNS",
     "LOG_COLUMNS",
+    "VOLTAGE_PAIR",
+    "SPEED_PAIRS",
+    "SPEED_COLUMNS",
+    "INPUT_MODES",
     "CURRENT_SENSORS",
+    "input_mode_of",
 ]
 
 INPUT_COLUMNS = ("t", "v_left", "v_right")  # must be present in every row
@@ -73,6 +102,12 @@ MEASURED_COLUMNS = ("i_left", "i_right", "speed_ideal", "yaw_rate")  # in the he
 REQUIRED_COLUMNS = INPUT_COLUMNS + MEASURED_COLUMNS
 OPTIONAL_COLUMNS = ("x", "y", "heading")  # may be absent from the header
 LOG_COLUMNS = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
+VOLTAGE_PAIR = ("v_left", "v_right")
+SPEED_PAIRS = {"omega": ("omega_left", "omega_right"), "track_speed": ("track_speed_left", "track_speed_right")}
+SPEED_UNITS = {"omega": "rad/s", "track_speed": "m/s"}
+SPEED_COLUMNS = SPEED_PAIRS["omega"] + SPEED_PAIRS["track_speed"]  # the input of a speed log, else measurements
+SPEED_MODE_REQUIRED = ("t", "i_left", "i_right", "yaw_rate")  # + one speed pair; speed_ideal optional
+INPUT_MODES = ("voltage", "speed")
 CURRENT_SENSORS = ("absolute", "signed")
 _MISSING = ("", "nan", "na", "n/a", "null", "none")
 
@@ -106,6 +141,39 @@ GAP_FACTOR = 100.0
 GAP_MIN_S = 1.0
 
 
+def input_mode_of(columns) -> tuple[str | None, str | None, str]:
+    """The input mode that a ``log.csv`` header implies: ``(mode, speed_kind, reason)``.
+
+    ``mode`` is ``"voltage"``, ``"speed"`` or None (no usable input pair: the reason says why);
+    ``speed_kind`` is ``"omega"`` or ``"track_speed"`` in speed mode, else None; ``reason`` is one
+    sentence naming the columns found.
+    """
+    cols = set(columns)
+    complete = [k for k, pair in SPEED_PAIRS.items() if all(c in cols for c in pair)]
+    partial = [c for c in SPEED_COLUMNS if c in cols]
+    found = f" (speed columns {'/'.join(partial)} kept as measurements)" if partial else ""
+    if all(c in cols for c in VOLTAGE_PAIR):
+        return "voltage", None, f"voltage mode: columns v_left/v_right present{found}"
+    have_v = [c for c in VOLTAGE_PAIR if c in cols]
+    if have_v:
+        other = [c for c in VOLTAGE_PAIR if c not in cols]
+        return None, None, f"column '{have_v[0]}' is present but '{other[0]}' is not (a voltage pair needs both)"
+    if len(complete) == 2:
+        return None, None, ("both speed pairs are present (omega_left/omega_right and "
+                            "track_speed_left/track_speed_right) and no v_left/v_right: which is the input is ambiguous; "
+                            "keep one pair")
+    if complete:
+        kind = complete[0]
+        return "speed", kind, f"speed mode: columns {kind}_left/right present, no v_left/v_right"
+    if partial:
+        kind = "omega" if partial[0].startswith("omega") else "track_speed"
+        other = [c for c in SPEED_PAIRS[kind] if c not in cols]
+        return None, None, (f"column '{partial[0]}' is present but '{other[0]}' is not, and there is no v_left/v_right "
+                            "(a speed pair needs both)")
+    return None, None, ("no input pair: neither v_left/v_right nor a speed pair (omega_left/omega_right or "
+                        "track_speed_left/track_speed_right)")
+
+
 @dataclass(frozen=True, eq=False)
 class FieldLog:
     """One field test read from a §9 folder.
@@ -125,9 +193,46 @@ class FieldLog:
         return self.data["t"].to_numpy(np.float64)
 
     @property
+    def input_mode(self) -> str | None:
+        """``"voltage"`` (the input is v_left/v_right) or ``"speed"`` (a speed pair); see the module docstring."""
+        return input_mode_of(self.data.columns)[0]
+
+    @property
+    def input_mode_reason(self) -> str:
+        """One sentence: which columns set the input mode (e.g. "speed mode: columns track_speed_left/right
+        present, no v_left/v_right")."""
+        return input_mode_of(self.data.columns)[2]
+
+    @property
     def volts(self) -> np.ndarray:
-        """(K, 2) motor voltages [v_left, v_right] [V]."""
-        return self.data[["v_left", "v_right"]].to_numpy(np.float64)
+        """(K, 2) motor voltages [v_left, v_right] [V]; raises :class:`FieldLogError` on a speed-mode log."""
+        if self.input_mode != "voltage":
+            raise FieldLogError(f"{self.folder / 'log.csv'}: no voltages to use: {self.input_mode_reason} (this is "
+                                "a speed-mode log; its input is FieldLog.speed_input)")
+        return self.data[list(VOLTAGE_PAIR)].to_numpy(np.float64)
+
+    @property
+    def speed_input(self) -> tuple[str, np.ndarray] | None:
+        """``(kind, (K, 2) [left, right])`` of a speed-mode log: kind ``"omega"`` [rad/s] or
+        ``"track_speed"`` [m/s]; None for a voltage-mode log."""
+        mode, kind, _ = input_mode_of(self.data.columns)
+        if mode != "speed":
+            return None
+        return kind, self.data[list(SPEED_PAIRS[kind])].to_numpy(np.float64)
+
+    def speeds(self) -> dict[str, np.ndarray]:
+        """The speed columns in the log (``omega_*``, ``track_speed_*``) that have at least one sample.
+
+        ``{column: (K,) float64}``, NaN where a sample is missing: the input pair of a speed-mode log,
+        measurements in a voltage-mode log.
+        """
+        out = {}
+        for col in SPEED_COLUMNS:
+            if col in self.data.columns:
+                v = self.data[col].to_numpy(np.float64)
+                if np.any(np.isfinite(v)):
+                    out[col] = v
+        return out
 
     @property
     def terrain(self) -> str:
@@ -149,6 +254,11 @@ class FieldLog:
     def synthetic(self) -> bool:
         """True if the log says it was written from a simulation (``"synthetic": true``)."""
         return self.meta.get("synthetic") is True
+
+    @property
+    def is_measured(self) -> bool:
+        """True if the log says it was recorded on a real vehicle (``"measured": true``)."""
+        return self.meta.get("measured") is True
 
     def measured(self) -> dict[str, np.ndarray]:
         """The measurement channels (§9 measured and optional columns) that have at least one sample.
@@ -177,7 +287,7 @@ class FieldLog:
     def __repr__(self) -> str:
         t = self.t
         return (f"FieldLog({str(self.folder)!r}, {len(self)} samples, t = {t[0]:g}..{t[-1]:g} s, "
-                f"terrain={self.terrain!r}, maneuver={self.maneuver!r}, current_sensor={self.current_sensor!r}, "
+                f"input={self.input_mode!r}, terrain={self.terrain!r}, maneuver={self.maneuver!r}, current_sensor={self.current_sensor!r}, "
                 f"measured={list(self.measured())})")
 
 
@@ -218,7 +328,37 @@ def validate_meta(meta: Any, where: str = "meta.json") -> dict:
                             f"(known: {', '.join(vehicles)})")
     if "notes" in meta and not isinstance(meta["notes"], str):
         raise FieldLogError(f"{where}: key 'notes' must be a string, got {type(meta['notes']).__name__}")
+    if "data" in meta and not isinstance(meta["data"], str):
+        raise FieldLogError(f"{where}: key 'data' must be a string label (e.g. \"MEASURED\"), got "
+                            f"{type(meta['data']).__name__}")
+    if "measured" in meta:
+        if not isinstance(meta["measured"], bool):
+            raise FieldLogError(f"{where}: key 'measured' must be true or false, got {meta['measured']!r}")
+        if meta["measured"] and meta.get("synthetic") is True:
+            raise FieldLogError(f"{where}: keys 'measured' and 'synthetic' are both true; a log is either recorded on "
+                                "a vehicle or written from a simulation")
+    if "sensors" in meta:
+        _validate_sensors(meta["sensors"], where)
     return meta
+
+
+SENSOR_NUMBERS = ("rate_hz", "quantisation", "resolution")  # optional numbers > 0 of a meta.json 'sensors' entry
+
+
+def _validate_sensors(sensors: Any, where: str) -> None:
+    if not isinstance(sensors, dict):
+        raise FieldLogError(f"{where}: key 'sensors' must be an object {{channel: {{rate_hz, quantisation, ...}}}}, "
+                            f"got {type(sensors).__name__}")
+    for name, entry in sensors.items():
+        if not isinstance(entry, dict):
+            raise FieldLogError(f"{where}: key 'sensors' -> '{name}' must be an object (rate_hz, quantisation, "
+                                f"resolution, ...), got {type(entry).__name__}")
+        for key in SENSOR_NUMBERS:
+            if key in entry:
+                x = entry[key]
+                ok = isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x > 0
+                if not ok:
+                    raise FieldLogError(f"{where}: key 'sensors' -> '{name}' -> '{key}' must be a number > 0, got {x!r}")
 
 
 def _read_meta(path: Path) -> dict:
@@ -277,7 +417,19 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
             raise FieldLogError(f"{path}: line 1 (header): column {i + 1} has an empty name")
         if name in header[:i]:
             raise FieldLogError(f"{path}: line 1 (header): column '{name}' appears twice")
-    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    mode, kind, reason = input_mode_of(header)
+    if mode == "speed":
+        inputs = ("t",) + SPEED_PAIRS[kind]
+        required = SPEED_MODE_REQUIRED[:1] + SPEED_PAIRS[kind] + SPEED_MODE_REQUIRED[1:]
+        req_text = f"required in speed mode: {','.join(required)}; speed_ideal optional"
+    else:
+        inputs = INPUT_COLUMNS
+        required = REQUIRED_COLUMNS
+        req_text = (f"required: {','.join(REQUIRED_COLUMNS)}, or a speed pair omega_left/omega_right or "
+                    "track_speed_left/track_speed_right in place of v_left/v_right")
+    if mode is None and not any(c in header for c in VOLTAGE_PAIR) and any(c in header for c in SPEED_COLUMNS):
+        raise FieldLogError(f"{path}: line 1 (header): {reason}")
+    missing = [c for c in required if c not in header]
     if missing:
         hint = ""
         for sep in (";", "\t", "|"):
@@ -292,8 +444,7 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
                 hint = f"; column names are case-sensitive (lower case): found {', '.join(found)}"
         raise FieldLogError(
             f"{path}: line 1 (header): missing required column(s) {', '.join(repr(c) for c in missing)} "
-            f"(required: {','.join(REQUIRED_COLUMNS)}; a channel that was not logged stays in the header with "
-            f"empty cells){hint}")
+            f"({req_text}; a channel that was not logged stays in the header with empty cells){hint}")
     if len(rows) < 2:
         raise FieldLogError(f"{path}: column 't': {len(rows)} data row(s); a log needs at least 2 samples")
 
@@ -305,7 +456,7 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
 
     data = {}
     for col in header:
-        if col not in LOG_COLUMNS:
+        if col not in LOG_COLUMNS and col not in SPEED_COLUMNS:
             data[col] = raw[col].str.strip()  # extra columns: kept as text, ignored
             continue
         s = raw[col].str.strip()
@@ -315,11 +466,12 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             raise FieldLogError(f"{where(col, k)}: {s.iloc[k]!r} is not a finite number")
-        if col in INPUT_COLUMNS and empty.any():
+        if col in inputs and empty.any():
             k = int(np.flatnonzero(empty)[0])
-            what = "time" if col == "t" else "voltage"
+            what = "time" if col == "t" else "voltage" if mode != "speed" else "speed"
             raise FieldLogError(f"{where(col, k)}: the {what} is missing ({s.iloc[k]!r}); '{col}' must be present in "
-                                f"every row (voltages are the replay input, linear between samples)")
+                                f"every row ({'voltages' if mode != 'speed' else 'speeds'} are the replay input, "
+                                "linear between samples)")
         data[col] = vals
     df = pd.DataFrame(data, columns=header)
 
@@ -327,9 +479,9 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
     dt = np.diff(t)
     if np.any(dt <= 0):
         k = int(np.flatnonzero(dt <= 0)[0]) + 1
-        kind = "duplicate time" if dt[k - 1] == 0 else "time goes backwards"
+        problem = "duplicate time" if dt[k - 1] == 0 else "time goes backwards"
         raise FieldLogError(f"{where('t', k)}: t = {t[k]:.15g} s is not greater than t = {t[k - 1]:.15g} s at line "
-                            f"{line[k - 1]} ({kind}); t must be strictly increasing")
+                            f"{line[k - 1]} ({problem}); t must be strictly increasing")
     if dt.size >= 1:
         med = float(np.median(dt))
         gaps = np.flatnonzero((dt > GAP_FACTOR * med) & (dt > GAP_MIN_S))
@@ -340,9 +492,10 @@ def _read_csv(path: Path, meta: dict) -> pd.DataFrame:
             warnings.warn(f"{where('t', k)}: a gap of {dt[k - 1]:.6g} s after t = {t[k - 1]:.15g} s (line "
                           f"{line[k - 1]}), {dt[k - 1] / med:.0f}x the median sample interval {med:.6g} s"
                           f"{f' ({gaps.size} such gaps)' if gaps.size > 1 else ''}; replay interpolates the "
-                          "voltages linearly across it", FieldLogWarning, stacklevel=3)
+                          f"{'voltages' if mode == 'voltage' else 'speeds'} linearly across it", FieldLogWarning,
+                          stacklevel=3)
     limit = _voltage_limit(meta["vehicle"])
-    for col in ("v_left", "v_right"):
+    for col in VOLTAGE_PAIR if mode == "voltage" else ():
         over = np.abs(df[col].to_numpy()) > limit + 1e-9
         if over.any():
             k = int(np.flatnonzero(over)[0])
@@ -384,30 +537,48 @@ def read_field_log(folder: str | Path) -> FieldLog:
 # writing
 
 
-def _fmt(x: float) -> str:
-    return "" if not math.isfinite(x) else f"{x:.8g}"
+def _fmt(x: float, digits: int = 8) -> str:
+    return "" if not math.isfinite(x) else f"{x:.{digits}g}"
 
 
-def write_log_columns(folder: str | Path, columns: dict, meta: dict) -> tuple[Path, Path]:
+def write_log_columns(folder: str | Path, columns: dict, meta: dict, *, digits: int | None = 8) -> tuple[Path, Path]:
     """Write ``log.csv`` and ``meta.json`` from ``{column: (K,) array}`` (NaN = missing) and a meta dict.
 
-    Columns are written in §9 order (``t`` first), then any others. ``meta`` is validated
-    (:func:`validate_meta`). Times are written with 15 significant digits, the other columns with
-    8 (float32 precision). Returns the two paths.
+    The input pair decides the mode (module docstring): ``v_left``/``v_right``, or, without them,
+    one speed pair (then ``speed_ideal`` may be left out). Columns are written in §9 order (``t``
+    first, then the speed columns), then any others. ``meta`` is validated (:func:`validate_meta`).
+    Times are written with 15 significant digits, the other columns with ``digits`` (default 8,
+    float32 precision); ``digits=None`` writes every number, times included, as the shortest text
+    that reads back to the same float64 (for measured data copied from another file). Returns the
+    two paths.
     """
     folder = Path(folder)
     meta = validate_meta(meta, f"{folder / 'meta.json'} (to be written)")
-    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    mode, kind, reason = input_mode_of(columns)
+    if mode == "speed":
+        inputs = ("t",) + SPEED_PAIRS[kind]
+        required = inputs + SPEED_MODE_REQUIRED[1:]
+    elif mode == "voltage":
+        inputs, required = INPUT_COLUMNS, REQUIRED_COLUMNS
+    else:
+        raise ValueError(f"write_log_columns: {reason}")
+    missing = [c for c in required if c not in columns]
     if missing:
         raise ValueError(f"write_log_columns: missing column(s) {missing}")
-    order = [c for c in LOG_COLUMNS if c in columns] + [c for c in columns if c not in LOG_COLUMNS]
+    known = LOG_COLUMNS + SPEED_COLUMNS
+    order = [c for c in LOG_COLUMNS if c in columns]
+    order = order[:1] + [c for c in SPEED_COLUMNS if c in columns] + order[1:] + [c for c in columns if c not in known]
     df = pd.DataFrame({c: np.asarray(columns[c], np.float64) for c in order})
-    for c in INPUT_COLUMNS:
+    for c in inputs:
         if not np.all(np.isfinite(df[c])):
             raise ValueError(f"write_log_columns: column '{c}' has non-finite values")
     if np.any(np.diff(df["t"].to_numpy()) <= 0):
         raise ValueError("write_log_columns: t must be strictly increasing")
-    out = pd.DataFrame({c: [f"{x:.15g}" for x in df[c]] if c == "t" else [_fmt(x) for x in df[c]] for c in order})
+    if digits is None:
+        out = pd.DataFrame({c: [repr(float(x)) if math.isfinite(x) else "" for x in df[c]] for c in order})
+    else:
+        out = pd.DataFrame({c: [f"{x:.15g}" for x in df[c]] if c == "t" else [_fmt(x, digits) for x in df[c]]
+                            for c in order})
     folder.mkdir(parents=True, exist_ok=True)
     log_path, meta_path = folder / "log.csv", folder / "meta.json"
     out.to_csv(log_path, index=False, lineterminator="\n")
