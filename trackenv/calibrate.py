@@ -41,7 +41,7 @@ from .diagnose.data import DiagnosisError, TestData, load_tests
 from .params import BOUNDS, ConfigError, check_range, load_params
 from .simulate import simulate_batch
 
-__all__ = ["Calibration", "Evaluation", "calibrate", "evaluate", "write_vehicle_config"]
+__all__ = ["Calibration", "Evaluation", "NaiveBaseline", "calibrate", "evaluate", "write_vehicle_config"]
 
 DEFAULT_SIGNALS = ("i_left", "i_right", "yaw_rate")
 
@@ -293,3 +293,75 @@ def write_vehicle_config(base: str | Path, values: dict, path: str | Path, sourc
     out.write_text(f"# {data['id']}: {src.name} with calibrated entries ({source}).\n"
                    + yaml.safe_dump(data, sort_keys=False, allow_unicode=True), encoding="utf-8")
     return out
+
+
+@dataclass
+class NaiveBaseline:
+    """A model-free reference for speed-mode logs, fitted by linear least squares on calibration logs.
+
+    Motor current per side: |i| = a + b |V_side| + c |V_right - V_left| (a current per speed, plus a term for
+    turning, where skid steering costs torque); yaw rate: r = chi (V_right - V_left) / B, the kinematic
+    skid-steer yaw rate with a fitted slip factor chi (B: the vehicle's track gauge). V are the log's track
+    speeds [m/s] (omega r_s' for ``omega`` columns). The simulator should beat it on held-out logs to be worth
+    its physics.
+    """
+
+    current: np.ndarray  # (3,) a [A], b [A s/m], c [A s/m]
+    chi: float
+    gauge: float
+
+    @staticmethod
+    def _features(t: TestData, radius: float):
+        v = t.drive_values * radius  # (K, 2) track speeds [m/s]
+        turn = np.abs(v[:, 1] - v[:, 0])
+        return v, turn
+
+    @classmethod
+    def fit(cls, logs: Sequence[str | Path], vehicle=None) -> NaiveBaseline:
+        """Fit on speed-mode ``logs`` (field-log folders or folders of them)."""
+        tests = _load(logs, "baseline")
+        rows, ys, kin, yaw = [], [], [], []
+        for t in tests:
+            if t.drive_kind != "speed":
+                raise DiagnosisError(f"{t.folder}: the naive baseline needs a speed-mode log")
+            radius, gauge = _radius_gauge(t, vehicle)
+            v, turn = cls._features(t, radius)
+            mask = t.fit_mask if t.fit_mask is not None else np.ones(len(t.t), bool)
+            for side, sig in enumerate(("i_left", "i_right")):
+                if sig in t.measured:
+                    ok = mask & np.isfinite(t.measured[sig])
+                    rows.append(np.stack([np.ones(ok.sum()), np.abs(v[ok, side]), turn[ok]], 1))
+                    ys.append(t.measured[sig][ok])
+            if "yaw_rate" in t.measured:
+                ok = mask & np.isfinite(t.measured["yaw_rate"])
+                kin.append((v[ok, 1] - v[ok, 0]) / gauge)
+                yaw.append(t.measured["yaw_rate"][ok])
+        coef = np.linalg.lstsq(np.concatenate(rows), np.concatenate(ys), rcond=None)[0]
+        k, y = np.concatenate(kin), np.concatenate(yaw)
+        return cls(coef, float(k @ y / max(k @ k, 1e-12)), gauge)
+
+    def evaluate(self, logs: Sequence[str | Path], vehicle=None) -> Evaluation:
+        """NRMSE and RMSE per log and channel, as :func:`evaluate` reports them for the simulator."""
+        nrmse, rmse, cost = {}, {}, 0.0
+        for t in _load(logs, "baseline"):
+            radius, gauge = _radius_gauge(t, vehicle)
+            v, turn = self._features(t, radius)
+            pred = {"i_left": self.current @ np.stack([np.ones_like(turn), np.abs(v[:, 0]), turn]),
+                    "i_right": self.current @ np.stack([np.ones_like(turn), np.abs(v[:, 1]), turn]),
+                    "yaw_rate": self.chi * (v[:, 1] - v[:, 0]) / gauge}
+            mask = t.fit_mask if t.fit_mask is not None else np.ones(len(t.t), bool)
+            nrmse[t.name], rmse[t.name] = {}, {}
+            for sig in DEFAULT_SIGNALS:
+                if sig in t.measured:
+                    ok = mask & np.isfinite(t.measured[sig])
+                    e = float(np.sqrt(np.mean((pred[sig][ok] - t.measured[sig][ok]) ** 2)))
+                    rmse[t.name][sig], nrmse[t.name][sig] = e, e / t.span[sig]
+                    cost += (e / t.span[sig]) ** 2
+        return Evaluation({"current": self.current.tolist(), "chi": self.chi}, nrmse, rmse, float(cost))
+
+
+def _radius_gauge(t: TestData, vehicle) -> tuple[float, float]:
+    from .physics.geometry import belt_radius  # noqa: PLC0415
+
+    p = load_params(t.terrain, vehicle=vehicle or t.vehicle)
+    return float(np.asarray(belt_radius(p.vehicle, p.terrain))), float(p.vehicle.track_gauge)

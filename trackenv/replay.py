@@ -266,8 +266,8 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
         cols = {"t": t_log, "v_left": log.volts[:, 0], "v_right": log.volts[:, 1]}
     else:  # the prescribed speeds, and the voltage the drive needs (4.2) as a simulated output
         cols = {"t": t_log, "omega_left": drive[:, 0], "omega_right": drive[:, 1]}
-        v_sim = interp_at(tt, grid, np.asarray(traj.voltage))
-        cols.update({"v_left_sim": v_sim[:, 0], "v_right_sim": v_sim[:, 1]})
+        v_sim = np.asarray(traj.voltage)
+        cols.update({"v_left_sim": interp_at(tt, grid, v_sim[:, 0]), "v_right_sim": interp_at(tt, grid, v_sim[:, 1])})
     cols.update({c: sim[c] for c in COMPARED})
     meta = {
         "terrain": terrain_id, "maneuver": log.maneuver, "current_sensor": sensor, "vehicle": log.vehicle,
