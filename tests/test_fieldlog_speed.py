@@ -160,3 +160,37 @@ def test_good_new_meta_keys():
                 sensors={"yaw_rate": {"rate_hz": 100.0, "filter": "box"}, "i_left": {"quantisation": 0.13,
                                                                                      "resolution": 0.01}})
     assert validate_meta(meta)["sensors"]["yaw_rate"]["filter"] == "box"
+
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+CELLS = ["", "nan", "inf", "-1e400", "x", "0.5", "-0.3", "1e3", " 2 ", "NA"]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(edits=st.lists(st.tuples(st.integers(0, 4), st.integers(0, 5), st.sampled_from(CELLS)), min_size=1,
+                      max_size=4),
+       drop=st.sampled_from([None, "track_speed_left", "track_speed_right", "yaw_rate", "i_left"]))
+def test_mutated_speed_logs_parse_or_name_the_file(tmp_path, edits, drop):
+    """A mutated speed log either parses with a finite speed input on every row or raises a FieldLogError
+    naming log.csv (never another exception)."""
+    header = TRACK_HEADER.split(",")
+    rows = [header] + [r.split(",") for r in TRACK_ROWS]
+    for line, col, value in edits:
+        rows[line][col] = value
+    if drop is not None and drop in rows[0]:
+        j = rows[0].index(drop)
+        rows = [r[:j] + r[j + 1:] for r in rows]
+    folder = tmp_path / f"f{abs(hash((tuple(edits), drop)))}"
+    make_log(folder, ",".join(rows[0]), [",".join(r) for r in rows[1:]])
+    try:
+        log = read_field_log(folder)
+    except FieldLogError as exc:
+        assert str(folder / "log.csv") in str(exc)
+    else:
+        if log.input_mode == "speed":
+            assert np.all(np.isfinite(log.speed_input[1])) and np.all(np.diff(log.t) > 0)
+        else:
+            assert log.input_mode == "voltage"

@@ -9,6 +9,7 @@
     trackenv field-twin --out data/field/thesis --seed 0   # SYNTHETIC field twin (known effects + noise)
     trackenv diagnose data/field/thesis --out out/diag     # sim-to-real gap: where, which effect, how far
     trackenv diagnose-benchmark --cases 14                 # the withheld-effect check on blind cases
+    trackenv import borealtc data/measured/borealtc --out out/borealtc   # MEASURED runs -> speed-mode field logs
 """
 
 from __future__ import annotations
@@ -219,6 +220,29 @@ def cmd_diagnose_benchmark(args) -> int:
     return 0
 
 
+def cmd_import_borealtc(args) -> int:
+    """``trackenv import borealtc <folder> --out <dir>``: BorealTC runs -> field logs (trackenv/importers/borealtc.py)."""
+    from trackenv.importers import import_borealtc
+
+    t0 = time.perf_counter()
+    try:
+        folders = import_borealtc(args.folder, args.out, runs=args.runs, force=args.force, progress=True,
+                                  report=print)
+    except OSError as exc:
+        print(f"trackenv: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(folders)} MEASURED field log(s) (speed mode) to {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+IMPORT_BOREALTC_HELP = """Convert runs of the BorealTC dataset (a Clearpath Husky A200; MEASURED, MIT licence) into
+docs/model.md §9.1 field-log folders <out>/<CLASS>_<XX>/ in speed mode: the wheel surface speeds are
+the input, the motor currents and the IMU's yaw rate (box-averaged onto the wheel-service time base)
+the measurements. FOLDER holds one sub-folder per terrain class (ASPHALT/, SANDY_LOAM/) with
+pro_XX.csv and imu_XX.csv files, e.g. data/measured/borealtc. Existing field logs in --out are not
+overwritten without --force. Bad input exits with code 2 and a message naming the file."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     from trackenv.envs.tasks import TASK_CLASSES
     from trackenv.simulate import DEFAULT_SUBSTEP
@@ -332,6 +356,16 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--rescore", action="store_true",
                    help="re-apply the verdict rule to the cached cases in --out (no fitting)")
     b.set_defaults(func=cmd_diagnose_benchmark)
+    imp = sub.add_parser("import", help="convert a public dataset of a real vehicle into field-log folders")
+    isub = imp.add_subparsers(dest="dataset", required=True)
+    ib = isub.add_parser("borealtc", help="BorealTC (Clearpath Husky A200): MEASURED runs -> speed-mode field logs",
+                         description=IMPORT_BOREALTC_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ib.add_argument("folder", help="the dataset folder (ASPHALT/, SANDY_LOAM/ with pro_XX.csv + imu_XX.csv)")
+    ib.add_argument("--out", required=True, help="output folder: one <CLASS>_<XX>/ field log per run")
+    ib.add_argument("--runs", default=None, help="comma-separated runs CLASS/XX, e.g. ASPHALT/00,SANDY_LOAM/02 "
+                                                 "(default: every run found)")
+    ib.add_argument("--force", action="store_true", help="overwrite existing field logs in the output folder")
+    ib.set_defaults(func=cmd_import_borealtc)
     return p
 
 

@@ -3,6 +3,7 @@
     from trackenv.fieldlog import read_field_log, write_field_log
     log = read_field_log("logs/zrt_sand_03")      # FieldLog; raises FieldLogError on bad input
     log.t, log.volts, log.measured()              # (K,), (K, 2), {"i_left": (K,), ...} with NaN gaps
+    log.input_mode, log.speed_input               # "voltage", None | "speed", ("track_speed", (K, 2))
     write_field_log("out/sim", traj, {"terrain": "dry_sand", "maneuver": "go_stop"})
 
 ``log.csv``: a header row, then one row per sample (any rate, regular or not). Columns (SI):
@@ -178,8 +179,9 @@ def input_mode_of(columns) -> tuple[str | None, str | None, str]:
 class FieldLog:
     """One field test read from a §9 folder.
 
-    ``data`` holds the log's columns in file order (the §9 columns as float64, NaN = missing sample;
-    any other column as text); ``meta`` the validated ``meta.json`` (``vehicle`` filled in with its
+    ``data`` holds the log's columns in file order (the §9 columns, speed columns included, as float64,
+    NaN = missing sample; any other column as text); the input mode follows from its columns
+    (:func:`input_mode_of`); ``meta`` the validated ``meta.json`` (``vehicle`` filled in with its
     default). ``eq=False``: DataFrames have no scalar ==.
     """
 
