@@ -46,9 +46,10 @@ ALLOWED_TYPES = {
 }
 
 # Dimension names of the shape strings (trackenv.physics docstring): 2 tracks, 3 pose/velocity
-# components or ETDRK4 stages, N contact points per track, n substeps, *b trailing batch axes
-# ("#": broadcastable, e.g. parameter leaves that are scalars), *s any shape of elementwise laws.
-DIMS = {"1", "2", "3", "N", "n", "*b", "*#b", "*s", "*#s", "..."}
+# components or ETDRK4 stages, N contact points per track, P contact patches per side, n substeps,
+# *b trailing batch axes ("#": broadcastable, e.g. parameter leaves that are scalars), *s any shape of
+# elementwise laws.
+DIMS = {"1", "2", "3", "N", "P", "n", "*b", "*#b", "*s", "*#s", "..."}
 
 
 def public_functions():

@@ -44,13 +44,20 @@ class ConfigError(ValueError):
 
 
 class Vehicle(eqx.Module):
-    """PackBot body, track geometry and drive train (App. A, B; Table 4.1). SI units."""
+    """Body, contact layout and drive train of a skid-steered vehicle (PackBot: App. A, B; Table 4.1). SI units.
+
+    Each side touches the ground in ``n_patches`` equal contact patches of length ``contact_length``,
+    their centres equally spaced from x = +wheelbase/2 (front) to -wheelbase/2 (rear): one patch
+    centred at x = 0 is a track (``n_patches = 1``, ``wheelbase = 0``, the thesis's PackBot), two are the
+    tyres of a four-wheel skid-steer vehicle (docs/model.md §1.1). ``n_contact`` points per side are
+    spread evenly over the patches, ``n_contact / n_patches`` (at least 2) over each.
+    """
 
     mass: jax.Array  # kg
     yaw_inertia: jax.Array  # kg m^2
     cg_height: jax.Array  # m
     track_gauge: jax.Array  # m, B: distance between track centrelines
-    contact_length: jax.Array  # m, L
+    contact_length: jax.Array  # m, L: length of one contact patch
     track_width: jax.Array  # m, b
     sprocket_radius: jax.Array  # m, r_s
     grouser_height: jax.Array  # m, h_g
@@ -63,12 +70,15 @@ class Vehicle(eqx.Module):
     drive_damping: jax.Array  # N m s/rad, b_eff
     stiction_torque: jax.Array  # N m, tau_stick
     voltage_limit: jax.Array  # V
-    n_contact: int = eqx.field(static=True, default=14)
+    gear_efficiency: jax.Array  # -, eta: torque efficiency of the gearing between motor and sprocket
+    wheelbase: jax.Array  # m, distance between the first and last patch centres (0 for a track)
+    n_contact: int = eqx.field(static=True, default=14)  # contact points per side, N
+    n_patches: int = eqx.field(static=True, default=1)  # contact patches per side, P (1: a track)
 
     @property
     def alpha(self) -> jax.Array:
-        """Torque gain at the sprocket, alpha = K_t G_r [N m/A] (§5.3.1)."""
-        return self.torque_constant * self.gear_ratio
+        """Torque gain at the sprocket, alpha = K_t G_r eta [N m/A] (§5.3.1; eta = 1 in the thesis)."""
+        return self.torque_constant * self.gear_ratio * self.gear_efficiency
 
     @property
     def alpha_v(self) -> jax.Array:
@@ -150,7 +160,10 @@ BOUNDS: dict[str, tuple[float | None, bool, float | None, bool]] = {
     "vehicle.drive_damping": (0.0, False, None, False),
     "vehicle.stiction_torque": (0.0, False, None, False),
     "vehicle.voltage_limit": (0.0, True, None, False),
+    "vehicle.gear_efficiency": (0.0, True, 1.0, False),
+    "vehicle.wheelbase": (0.0, False, None, False),
     "vehicle.n_contact": (2.0, False, None, False),
+    "vehicle.n_patches": (1.0, False, None, False),
     "terrain.deformable": (0.0, False, 1.0, False),
     "terrain.cohesion": (0.0, False, None, False),
     "terrain.friction_angle": (0.0, False, math.pi / 2, True),
@@ -183,8 +196,12 @@ _VEHICLE_KEYS = {
     "drive_damping": ("vehicle.drive_damping", "N m s/rad"),
     "stiction_torque": ("vehicle.stiction_torque", "N m"),
     "voltage_limit": ("vehicle.voltage_limit", "V"),
+    "gear_efficiency": ("vehicle.gear_efficiency", "-"),
+    "wheelbase": ("vehicle.wheelbase", "m"),
     "n_contact": ("vehicle.n_contact", "-"),
+    "n_patches": ("vehicle.n_patches", "-"),
 }
+_VEHICLE_INTEGERS = ("n_contact", "n_patches")  # static: they select the compiled program
 _TERRAIN_KEYS = {
     "cohesion": ("terrain.cohesion", "Pa"),
     "friction_angle": ("terrain.friction_angle", "deg"),  # stored in rad
@@ -416,13 +433,42 @@ def load_vehicle(name_or_path: str | Path = "packbot", dtype=jnp.float32) -> Veh
         if key == "speed_constant":
             check_value("vehicle.back_emf_constant", value, str(path), label=f"key '{key}'")  # > 0 in rpm/V too
             value = 60.0 / (2.0 * math.pi * value)  # rpm/V -> V s/rad (back-emf constant)
-        if key == "n_contact":
+        if key in _VEHICLE_INTEGERS:
             if value != int(value):
-                raise ConfigError(f"{path}: key 'n_contact' must be an integer, got {fmt_num(value)}")
+                raise ConfigError(f"{path}: key '{key}' must be an integer, got {fmt_num(value)}")
             kwargs[attr] = int(value)
         else:
             kwargs[attr] = jnp.asarray(value, dtype)
-    return Vehicle(**kwargs)
+    return check_layout(Vehicle(**kwargs), str(path))
+
+
+def check_layout(vehicle: Vehicle, where: str = "") -> Vehicle:
+    """Check that the contact layout is consistent; return ``vehicle``.
+
+    ``n_contact`` must be a multiple of ``n_patches`` with at least 2 points per patch; one patch (a track)
+    must have ``wheelbase`` 0; several patches must not overlap (patch pitch wheelbase/(P-1) >= L).
+    Raises :class:`ConfigError` naming ``where`` and the key. Traced leaves are not checked.
+    """
+    at = f"{where}: " if where else ""
+    n, p = vehicle.n_contact, vehicle.n_patches
+    if n % p != 0 or n // p < 2:
+        raise ConfigError(f"{at}key 'n_contact' = {n} must be a multiple of n_patches = {p} with at least "
+                          f"2 contact points per patch")
+    if not (_is_concrete(vehicle.wheelbase) and _is_concrete(vehicle.contact_length)):
+        return vehicle
+    wheelbase = np.asarray(vehicle.wheelbase, np.float64)
+    if p == 1 and np.any(wheelbase != 0.0):
+        raise ConfigError(f"{at}key 'wheelbase' = {fmt_num(wheelbase.reshape(-1)[0])} m must be 0 with "
+                          f"n_patches = 1 (a track is one patch centred at the CG)")
+    if p > 1:
+        pitch = wheelbase / (p - 1)
+        length = np.asarray(vehicle.contact_length, np.float64)
+        own = np.asarray(vehicle.wheelbase).dtype  # in the leaves' precision, as check_value does
+        if np.any(pitch.astype(own) < length.astype(own)):
+            raise ConfigError(f"{at}key 'wheelbase' = {fmt_num(wheelbase.reshape(-1)[0])} m: the {p} patches "
+                              f"of length contact_length = {fmt_num(length.reshape(-1)[0])} m overlap "
+                              f"(need wheelbase >= (n_patches - 1) contact_length)")
+    return vehicle
 
 
 def load_terrain(name_or_path: str | Path = "dry_sand", dtype=jnp.float32) -> tuple[Terrain, dict]:
@@ -550,8 +596,10 @@ def replace(params: Params, **changes: Any) -> Params:
 def validate_params(params: Params, where: str = "") -> Params:
     """Check every bounded leaf of ``params`` (:data:`BOUNDS`) and every effect's ``bounds``; return it.
 
-    Raises :class:`ConfigError` naming the parameter (and ``where``). Traced leaves are skipped.
+    Raises :class:`ConfigError` naming the parameter (and ``where``). Traced leaves are skipped. The
+    contact layout is checked too (:func:`check_layout`).
     """
+    check_layout(params.vehicle, where)
     for path in BOUNDS:
         node = params
         for part in path.split("."):

@@ -1,5 +1,8 @@
 """Track-terrain contact: kinematics, z*/z-bar logic, shear-displacement rates and contact forces.
 
+A side is a track (one contact patch) or several wheel patches (docs/model.md §1.1); the same element
+laws apply to every patch.
+
 docs/model.md §3; thesis §3.4.2-3.4.6. Shapes follow ``trackenv.physics`` (element arrays (2, N, *b)).
 """
 
@@ -12,7 +15,7 @@ from jaxtyping import Array, Float
 
 from ..params import Terrain, Vehicle
 from . import terramechanics as tm
-from .geometry import belt_radius, contact_area, contact_x, track_y
+from .geometry import belt_radius, contact_area, contact_x, patch_edges, patch_x, per_point, track_y
 
 # Smoothing constants of Table C.1 (docs/model.md §2), SI.
 LEADING_EDGE_SPEED = 1e-2  # m/s, Delta V_z: below it the leading edge follows the ground speed
@@ -32,10 +35,10 @@ class Kinematics(NamedTuple):
     ground_speed: Float[Array, " 2 *b"]  # m/s, u - r y_k, (2, *b)
     slip: Float[Array, " 2 *b"]  # m/s, s_k = V_t - (u - r y_k), (2, *b)
     lateral_velocity: Float[Array, " 1 N *b"]  # m/s, v + r x_i, (1, N, *b)
-    z_star: Float[Array, " 2 N *b"]  # m, distance from the leading edge, (2, N, *b)
-    z_tilde: Float[Array, " 2 N *b"]  # m, distance from the leading edge or from z-bar, (2, N, *b)
+    z_star: Float[Array, " 2 N *b"]  # m, distance from the leading edge of the point's patch, (2, N, *b)
+    z_tilde: Float[Array, " 2 N *b"]  # m, distance from that leading edge or from z-bar, (2, N, *b)
     x: Float[Array, " 1 N *#b"]  # m, contact x, (1, N, *b)
-    y: Float[Array, " 2 *#b"]  # m, track centreline y, (2, *b)
+    y: Float[Array, " 2 *#b"]  # m, track (wheel) centreline y, (2, *b)
     area: Float[Array, " 1 N *#b"]  # m^2, element areas, (1, N, *b)
 
 
@@ -52,27 +55,32 @@ def kinematics(
     slip = belt_speed - ground_speed
     vy = v + r * x  # (1, N, *b)
 
-    # Leading edge: where belt material enters the contact patch (§3.4.2.2).
+    # Leading edge: where belt material enters the contact patch (§3.4.2.2). On a wheeled side every
+    # patch has its own leading edge, all at the same end (docs/model.md §1.1).
     front = jnp.where(
         belt_speed > LEADING_EDGE_SPEED,
         True,
         jnp.where(belt_speed < -LEADING_EDGE_SPEED, False, ground_speed >= 0.0),
     )  # (2, *b)
     half = 0.5 * vehicle.contact_length
-    z_from_front = half - x  # (1, N, *b)
-    z_from_rear = x + half
+    local = patch_x(vehicle, nb)  # (1, N, *b), x relative to the point's patch centre
+    z_from_front = half - local  # (1, N, *b), from the front edge of the point's patch
+    z_from_rear = local + half
     z_star = jnp.where(front[:, None], z_from_front, z_from_rear)
 
-    # z-bar: where the lateral velocity changes sign along the track (3.29), (3.30).
-    vy_front = v + r * half
-    vy_rear = v - r * half
-    v_first = jnp.where(front, vy_front, vy_rear)  # (2, *b)
-    v_last = jnp.where(front, vy_rear, vy_front)
+    # z-bar: where the lateral velocity changes sign along each patch (3.29), (3.30), from the lateral
+    # velocities at the patch's front and rear edges.
+    ahead, behind = patch_edges(vehicle, nb)  # m, (1, P, *b); L/2 for a track
+    vy_front = v + r * ahead
+    vy_rear = v - r * behind
+    first = front[:, None]  # (2, 1, *b): the leading edge is at the same end of every patch
+    v_first = jnp.where(first, vy_front, vy_rear)  # (2, P, *b)
+    v_last = jnp.where(first, vy_rear, vy_front)
     changes_sign = v_first * v_last < 0.0
     denom = jnp.where(changes_sign, v_first - v_last, 1.0)
-    z_bar = jnp.where(changes_sign, v_first / denom * vehicle.contact_length, jnp.inf)
-    past = z_star >= z_bar[:, None]
-    z_tilde = jnp.where(past, z_star - z_bar[:, None], z_star)  # (3.31)
+    z_bar = per_point(vehicle, jnp.where(changes_sign, v_first / denom * vehicle.contact_length, jnp.inf))
+    past = z_star >= z_bar
+    z_tilde = jnp.where(past, z_star - z_bar, z_star)  # (3.31)
     return Kinematics(rb, belt_speed, ground_speed, slip, vy, z_star, z_tilde, x, y, contact_area(vehicle, nb))
 
 
@@ -177,7 +185,13 @@ def compaction_force(
     kin: Kinematics,
     normal: Float[Array, " 2 N *b"],
 ) -> Float[Array, " 2 *b"]:
-    """Signed compaction resistance per track along +x [N] (3.40); zero on hard ground."""
+    """Signed compaction resistance per side along +x [N] (3.40), summed over its patches; zero on hard ground.
+
+    Each patch compacts like a plate of its length L and width b: sum_i A_i/((n+1) L k^(1/n)) p_i^((n+1)/n)
+    over the points of one patch is Bekker's b k z^(n+1)/(n+1) for a uniform pressure. A tyre patch is
+    thus modelled as a short rigid track segment (docs/model.md §1.1), not by Bekker's rigid-wheel formula;
+    every patch compacts fresh ground (a rear tyre running in the front tyre's rut is not modelled).
+    """
     k = tm.bekker_modulus(terrain.k_c, terrain.k_phi, vehicle.track_width)
     per_element = tm.compaction_resistance(
         normal, kin.area, vehicle.contact_length, k, terrain.sinkage_exponent

@@ -109,7 +109,7 @@ def bekker_sinkage(normal_pressure: _In, k: _In, n: _In) -> _Out:
 
 
 def compaction_resistance(normal_force: _In, area: _In, contact_length: _In, k: _In, n: _In) -> _Out:
-    """Bekker compaction resistance of one track, discretised (3.40) [N].
+    """Bekker compaction resistance of one track (or one patch of length L), discretised (3.40) [N].
 
     R_c = sum_i A_i / ((n+1) L k^(1/n)) (F_n,i / A_i)^((n+1)/n). Elementwise: returns the per-element
     contributions, and callers sum over the element axis.
