@@ -221,3 +221,14 @@ def test_bounds_apply_to_replace():
     q = te.replace(p, **{"vehicle.gear_efficiency": 0.5})
     assert float(q.vehicle.alpha) == pytest.approx(float(p.vehicle.alpha) * 0.5 / 0.7, rel=1e-6)
     assert math.isclose(float(q.vehicle.alpha_v), float(p.vehicle.alpha_v))  # back-emf unchanged
+
+
+def test_vehicle_internal_resistance_replaces_the_terrain_files():
+    from trackenv.params import load_params, vehicle_internal_resistance
+
+    assert vehicle_internal_resistance("packbot") == {}
+    packbot = load_params("asphalt")
+    assert float(packbot.internal.constant) == pytest.approx(0.73)  # Table 5.4 (the PackBot's tracks)
+    husky = load_params("asphalt", vehicle="husky")
+    assert float(husky.internal.constant) == 0.0
+    assert float(load_params("dry_sand", vehicle="husky", internal_resistance="viscous").internal.viscous) == 0.0

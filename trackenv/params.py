@@ -425,7 +425,7 @@ def load_vehicle(name_or_path: str | Path = "packbot", dtype=jnp.float32) -> Veh
     """Load and validate a vehicle config (``configs/vehicle/<id>.yaml`` or a path)."""
     path = _resolve(name_or_path, VEHICLE_DIR, "vehicle")
     data = _read_yaml(path)
-    _check_keys(path, data, set(_VEHICLE_KEYS), set(_VEHICLE_KEYS))
+    _check_keys(path, data, set(_VEHICLE_KEYS) | set(_VEHICLE_INTERNAL), set(_VEHICLE_KEYS))
     kwargs: dict[str, Any] = {}
     for key, (param, unit) in _VEHICLE_KEYS.items():
         attr = param.split(".", 1)[1]
@@ -440,6 +440,23 @@ def load_vehicle(name_or_path: str | Path = "packbot", dtype=jnp.float32) -> Veh
         else:
             kwargs[attr] = jnp.asarray(value, dtype)
     return check_layout(Vehicle(**kwargs), str(path))
+
+
+# Optional vehicle keys: the vehicle's own internal resistance, replacing the terrain file's values (which the
+# thesis tuned for the PackBot's tracks, Tables 5.3-5.4) when that vehicle is simulated on any terrain.
+_VEHICLE_INTERNAL = {
+    "internal_resistance_constant": ("internal.constant", "N m"),
+    "internal_resistance_viscous": ("internal.viscous", "N m s/rad"),
+}
+
+
+def vehicle_internal_resistance(name_or_path: str | Path = "packbot") -> dict:
+    """The vehicle config's own internal-resistance values, ``{"constant": b*_int [N m], "viscous": b_int
+    [N m s/rad]}`` for the keys it sets (empty: the terrain file's values apply, as for the PackBot)."""
+    path = _resolve(name_or_path, VEHICLE_DIR, "vehicle")
+    data = _read_yaml(path)
+    return {param.split(".")[1]: _number(path, key, _entry_si(path, data, key, unit), param)
+            for key, (param, unit) in _VEHICLE_INTERNAL.items() if key in data}
 
 
 def check_layout(vehicle: Vehicle, where: str = "") -> Vehicle:
@@ -560,6 +577,7 @@ def load_params(
         raise ConfigError(f"internal_resistance must be 'constant' or 'viscous', got {internal_resistance!r}")
     veh = load_vehicle(vehicle, dtype)
     ter, internal = load_terrain(terrain, dtype)
+    internal = dict(internal, **vehicle_internal_resistance(vehicle))
     zero = jnp.asarray(0.0, dtype)
     if internal_resistance == "constant":
         ir = InternalResistance(constant=jnp.asarray(internal["constant"], dtype), viscous=zero)
