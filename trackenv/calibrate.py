@@ -55,6 +55,7 @@ class Evaluation:
     rmse: dict
     cost: float
     diverged: list = field(default_factory=list)
+    predictions: dict = field(default_factory=dict)  # log -> {"t": (K,), channel: (K,) simulated, as its instruments}
 
 
 @dataclass
@@ -131,9 +132,10 @@ class _Problem:
     def evaluation(self, values: dict) -> Evaluation:
         sets = np.array([[values[n] for n in self.names]], np.float64)
         pred, div = self.predict(sets)
-        nrmse, rmse, cost = {}, {}, 0.0
+        nrmse, rmse, cost, preds = {}, {}, 0.0, {}
         for j, t in enumerate(self.tests):
             nrmse[t.name], rmse[t.name] = {}, {}
+            preds[t.name] = {"t": t.t, **{sig: pred[j][sig][:, 0] for sig in self.signals[j]}}
             for sig in self.signals[j]:
                 meas = t.measured[sig]
                 ok = np.isfinite(meas) & (t.fit_mask if t.fit_mask is not None else True)
@@ -141,7 +143,8 @@ class _Problem:
                 rmse[t.name][sig] = e
                 nrmse[t.name][sig] = e / t.span[sig]
                 cost += (e / t.span[sig]) ** 2
-        return Evaluation(dict(values), nrmse, rmse, float(cost), [t.name for j, t in enumerate(self.tests) if div[j, 0]])
+        return Evaluation(dict(values), nrmse, rmse, float(cost), [t.name for j, t in enumerate(self.tests) if div[j, 0]],
+                          preds)
 
 
 def _leaf(params, dotted: str):

@@ -185,7 +185,7 @@ def cmd_diagnose(args) -> int:
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None
     d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
                  seed=args.seed, figures=not args.no_figures, progress=True, polish_iters=args.polish_iters,
-                 alpha=args.alpha)
+                 alpha=args.alpha, vehicle=args.vehicle)
     v = d.verdict
     print(f"{d.report['data_label']}")
     print(f"verdict: {v['verdict_line']}")
@@ -335,6 +335,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     g.add_argument("--polish-iters", type=int, default=4, help="Levenberg-Marquardt iterations per fit (0: none)")
     g.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdict rule")
+    g.add_argument("--vehicle", default=None,
+                   help="vehicle id or YAML path for every test instead of its meta.json vehicle (e.g. a calibrated one)")
     g.add_argument("--force", action="store_true",
                    help="write into the output folder even if it holds field logs trackenv did not write")
     g.set_defaults(func=cmd_diagnose)

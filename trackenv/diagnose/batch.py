@@ -124,9 +124,11 @@ class BatchSimulator:
         self.buckets = make_buckets(tests, substep, pad_s)
         self.base = [load_params(t.terrain, vehicle=vehicle or t.vehicle, internal_resistance=internal_resistance)
                      for t in tests]
-        self.b_int_constant = np.array(
-            [float(load_params(t.terrain, vehicle=vehicle or t.vehicle, internal_resistance="constant").internal.constant)
-             for t in tests])
+        # The reference constant torque [N m] that the internal_resistance candidate scales: the terrain's b*_int
+        # (Table 5.4), or the drive's stiction torque for a vehicle that sets no internal resistance of its own.
+        ref = [load_params(t.terrain, vehicle=vehicle or t.vehicle, internal_resistance="constant") for t in tests]
+        self.b_int_constant = np.array([float(p.internal.constant) if float(p.internal.constant) > 0
+                                        else float(p.vehicle.stiction_torque) for p in ref])
         self.n_vehicle_seconds = 0.0
         self._base_channels = {}  # bucket index -> raw base-model channels on the output grid (T, nb)
         # interpolation of the output grid at each log's times

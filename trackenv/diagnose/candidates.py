@@ -15,14 +15,16 @@ Ranges are the physically plausible ones (the effect classes' ``bounds`` are wid
 - ``internal_resistance``: a monotone function of |ω| (:class:`KnotInternalResistance`):
   τ = sign(ω) · (b0 + s1·min(|ω|, 3) + s2·clip(|ω| − 3, 0, 9) + s3·max(|ω| − 12, 0)) with knots at 3 and
   12 rad/s (0.27 and 1.07 m/s of belt speed); b0 = f0 · b*_int(terrain) with f0 0-3 (f0 scales each terrain's
-  Table 5.4 value so one fit serves tests on several terrains), slopes s1 0-0.5, s2, s3 0-0.2 N m s/rad.
+  Table 5.4 value so one fit serves tests on several terrains; for a vehicle that sets no internal resistance
+  of its own, e.g. ``husky``, the reference is its drive's ``stiction_torque``), slopes s1 0-0.5, s2, s3 0-0.2 N m s/rad.
   The family holds the constant law (slopes 0), the viscous one (b0 = 0, equal slopes), speed-linear and
   convex (quadratic-like) or concave (a low-speed knee, tanh-like) laws;
 - ``grouser_stiction``: M0 0.5-30 N m, r_fade 0.1-5 rad/s, F0 0-60 N;
 - ``pitch_load_transfer``: height factor 0-3, τ 0.01-0.5 s;
 - ``sensor_artifacts``: encoder window 0-1 s, gyro bias ±0.1 rad/s (ripple is not fitted: a
   ripple is indistinguishable from noise in an RMS comparison; rectification comes from meta.json);
-- ``recalibrate_base``: factors on b*_int (and b_int) 0.7-1.4, c 0.5-2, φ 0.9-1.1, K 0.5-2 (the
+- ``recalibrate_base``: factors on b*_int (and b_int; on the drive's stiction torque for a vehicle without
+  internal resistance) 0.7-1.4, c 0.5-2, φ 0.9-1.1, K 0.5-2 (the
   plausible uncertainty of measured soil values; wider ranges let four parameters chase the noise of
   the calibration tests and lose out of sample, which would blunt the control).
 """
@@ -149,7 +151,11 @@ class Candidate:
                                       shear_modulus=ter.shear_modulus * f(values["shear_modulus_factor"]))
             k = f(values["internal_resistance_factor"])
             itr = dataclasses.replace(itr, constant=itr.constant * k, viscous=itr.viscous * k)
-            return dataclasses.replace(base, terrain=ter, internal=itr)
+            # a vehicle without internal resistance of its own (both zero): its drive's stiction is the torque
+            veh = base.vehicle
+            no_int = (base.internal.constant == 0) & (base.internal.viscous == 0)
+            veh = dataclasses.replace(veh, stiction_torque=veh.stiction_torque * jnp.where(no_int, k, 1.0))
+            return dataclasses.replace(base, terrain=ter, internal=itr, vehicle=veh)
         B = np.shape(next(iter(values.values())))[0]
         if self.name == "internal_resistance":
             return dataclasses.replace(base, effects=(KnotInternalResistance(

@@ -108,6 +108,19 @@ def _masked(sq: list[dict], masks: list) -> list[dict]:
     return [{s: np.where(m, e2, np.nan) for s, e2 in d.items()} for d, m in zip(sq, masks)]
 
 
+def data_label(data: list[TestData]) -> str:
+    """What the logs are, from their meta.json: SYNTHETIC, MEASURED, or field logs that say neither."""
+    synthetic = [t.name for t in data if t.log.synthetic]
+    measured = [t.name for t in data if t.log.meta.get("measured") is True]
+    if synthetic:
+        return "SYNTHETIC: " + ", ".join(synthetic) + " say synthetic: true in meta.json (not measured)"
+    if measured and len(measured) == len(data):
+        return "MEASURED: every log says measured: true in meta.json"
+    if measured:
+        return "MEASURED: " + ", ".join(measured) + "; the others' meta.json says neither measured nor synthetic"
+    return "field logs (meta.json does not say synthetic)"
+
+
 def gap_cells(data: list[TestData], base_pred: list[dict]) -> list[dict]:
     """Is the base model's gap real: the AR(1)-noise χ² test (:func:`.stats.gap_test`) per test × signal.
 
@@ -488,12 +501,12 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     cell_ci(data, rows, sq_base, sq_after, seed=seed)
     significant = rule["gap_significant"]
     carriers = gap_carriers(rows) if significant else []
-    synthetic = [t.name for t in data if t.log.synthetic]
     report = {
         "tool": "trackenv diagnose", "folder": str(folder),
-        "data_label": ("SYNTHETIC: " + ", ".join(synthetic) + " say synthetic: true in meta.json (not measured)")
-        if synthetic else "field logs (meta.json does not say synthetic)",
-        "base_model": {"internal_resistance": internal_resistance, "substep_s": substep},
+        "data_label": data_label(data),
+        "base_model": {"internal_resistance": internal_resistance, "substep_s": substep,
+                       "vehicle": str(vehicle) if vehicle else "each log's meta.json vehicle",
+                       "input_modes": sorted({t.drive_kind for t in data})},
         "verdict": {
             "effect": effect, "confidence": confidence, "verdict_line": line, "flags": flags,
             "heldout_gap_shrink": shrink if effect != NONE else 0.0,

@@ -126,7 +126,9 @@ def write_report(diag, out: Path, figures: bool = True) -> dict:
     L = [f"# Sim-to-real gap diagnosis: `{rep['folder']}`", "",
          f"**Data:** {rep['data_label']}.", "",
          f"Base model: {rep['base_model']['internal_resistance']} internal resistance; fits at a "
-         f"{1e3 * rep['base_model']['substep_s']:g} ms substep. Wall time {rep['timing']['wall_s']:.0f} s.", "",
+         f"{1e3 * rep['base_model']['substep_s']:g} ms substep; vehicle: {rep['base_model'].get('vehicle', 'the logs')}; "
+         f"drive input: {', '.join(rep['base_model'].get('input_modes', ['voltage']))} mode. "
+         f"Wall time {rep['timing']['wall_s']:.0f} s.", "",
          "## Verdict", ""]
     L += [f"**{v['verdict_line']}**", "",
           f"Base-model gap {v['gap_before']:.2f} noise units (held-out samples: {v['gap_before_heldout']:.2f}); "
