@@ -438,6 +438,16 @@ case("diagnose --out into the field-log folder", "diagnosis folder",
 case("diagnose --out into another log collection", "diagnosis folder",
      lambda t: cli("diagnose", log_folder(t / "tests", "x").parent, "--out", log_folder(t / "other", "y").parent),
      expect_error(Exception, "other", "--force", rc=2))
+case("diagnose --vehicle unknown id", "diagnosis folder",
+     lambda t: cli("diagnose", log_folder(t / "tests", "x").parent, "--out", t / "d", "--vehicle", "tank"),
+     expect_error(Exception, "tank", rc=2))
+case("import borealtc from a missing folder", "CLI option",
+     lambda t: cli("import", "borealtc", t / "nope", "--out", t / "o"),
+     expect_error(Exception, "nope", rc=2))
+case("calibration bounds reversed", "config",
+     lambda t: call(lambda: __import__("trackenv.calibrate", fromlist=["calibrate"]).calibrate(
+         [log_folder(t)], {"vehicle.mass": (20.0, 10.0)}, progress=False)),
+     expect_error(Exception, "vehicle.mass", "high 10 must exceed low 20"))
 
 
 @pytest.mark.parametrize("run,check", CASES)
