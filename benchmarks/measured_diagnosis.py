@@ -4,7 +4,7 @@
     python benchmarks/measured_diagnosis.py --dataset DIR --out DIR  # e.g. the whole public dataset
 
 1. **Import** every run (``trackenv import borealtc``): speed-mode field logs (wheel speeds in; currents
-   and the IMU's yaw rate measured).
+   and the IMU's yaw rate measured), and **replay** each with the configs as they are (``replay/<run>/``).
 2. **Calibrate on asphalt**, leaving one run out at a time: the Husky's uncertain drive and contact
    parameters (``PARAMETERS``) are fitted to the other asphalt runs (:func:`trackenv.calibrate.calibrate`)
    and the held-out run is predicted by the configs as they are, by the calibrated model and by a
@@ -39,6 +39,7 @@ sys.path.insert(0, str(ROOT))
 from trackenv.calibrate import NaiveBaseline, calibrate, evaluate, write_vehicle_config  # noqa: E402
 from trackenv.compare import json_clean  # noqa: E402
 from trackenv.importers.borealtc import import_borealtc  # noqa: E402
+from trackenv.replay import replay  # noqa: E402
 
 # The Husky's uncertain parameters on asphalt [SI]: the drive's no-load friction (the dataset's 1.35 A
 # no-load current gives 3.27 N m) and viscous loss, the tyre-asphalt friction angle (rad) and shear modulus.
@@ -133,6 +134,13 @@ def main(argv=None) -> int:
         keep = {f"SANDY_LOAM_{r.strip()}" for r in args.sandy_runs.split(",")}
         sandy = [p for p in sandy if p.name in keep]
     print(f"imported {len(asphalt)} asphalt and {len(sandy)} sandy-loam runs in {timing['import_s']:.1f} s")
+    t0 = time.perf_counter()
+    replays = {}
+    for p in logs:  # every run replayed with the configs as they are (speed mode), a figure each
+        r = replay(p, out / "replay" / p.name, force=True)
+        replays[p.name] = {k: (v or {}).get("nrmse") for k, v in r.metrics["channels"].items()}
+    timing["replay_s"] = time.perf_counter() - t0
+    print(f"replayed {len(logs)} runs in {timing['replay_s']:.0f} s")
     if args.asphalt_crop:
         crop_dir = _crop(asphalt, out / "asphalt_cropped", args.asphalt_crop)
         asphalt = sorted(crop_dir / p.name for p in asphalt)
@@ -195,7 +203,7 @@ def main(argv=None) -> int:
                "parameters": PARAMETERS, "asphalt_heldout": [{k: v for k, v in r.items() if k not in
                                                             ("t", "base_pred", "cal_pred", "naive_pred", "measured")}
                                                            for r in rows],
-               "calibrated_vehicle": vehicle_values, "final_calibration": final.values,
+               "replay_nrmse_configs": replays, "calibrated_vehicle": vehicle_values, "final_calibration": final.values,
                "final_at_bound": final.at_bound, "sandy_loam_crop_s": args.crop, "asphalt_crop_s": args.asphalt_crop,
                "sandy_loam_runs": [p.name for p in sandy], "diagnoses": diagnoses,
                "timing": timing}

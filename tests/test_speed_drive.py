@@ -72,3 +72,30 @@ def test_bad_speed_profiles_are_refused():
         te.SpeedProfile.from_arrays([0.0, 1.0], [[0.0, 0.0], [1.0, np.nan]])
     with pytest.raises(ValueError, match="omega_left.*exceeds the physical bound"):
         te.simulate(p, te.SpeedProfile.from_arrays([0.0, 1.0], [[0.0, 0.0], [1e5, 0.0]]), t_end=1.0)
+
+
+def test_the_diagnosis_simulates_speed_mode_logs_as_replay_does(tmp_path):
+    """A speed-mode log: the diagnosis's batch and replay give the same predictions (one comparison layer)."""
+    from trackenv.diagnose.batch import BatchSimulator
+    from trackenv.diagnose.candidates import NONE, candidate_set
+    from trackenv.diagnose.data import load_tests
+    from trackenv.fieldlog import write_log_columns
+    from trackenv.replay import replay
+
+    t = np.arange(0, 6.0, 0.1)
+    v = np.stack([np.interp(t, [0, 1, 6], [0, 0.3, 0.3]), np.interp(t, [0, 1, 3, 6], [0, 0.3, 0.5, 0.5])], 1)
+    cols = {"t": t, "track_speed_left": v[:, 0], "track_speed_right": v[:, 1], "i_left": 2 + 0.5 * np.sin(t),
+            "i_right": 2 + t / 6, "yaw_rate": 0.1 * np.sin(t), "speed_ideal": v.mean(axis=1)}
+    write_log_columns(tmp_path / "logs" / "a", cols, {"terrain": "dry_sand", "maneuver": "turn",
+                                                      "current_sensor": "absolute", "vehicle": "husky",
+                                                      "synthetic": True, "source": "test"})
+    (test,), _ = load_tests(tmp_path / "logs")
+    assert test.drive_kind == "speed" and "speed_ideal" not in test.measured
+    assert any("drive input" in n for n in test.notes)
+    none = next(c for c in candidate_set() if c.name == NONE)
+    pred, div = BatchSimulator([test], substep=0.0005).run(none, {})
+    rep = replay(tmp_path / "logs" / "a", tmp_path / "r", figure=False)
+    assert not div.any() and rep.metrics["input_mode"] == "speed"
+    for sig in ("i_left", "i_right", "yaw_rate"):
+        scale = np.ptp(rep.simulated[sig]) + 1e-3
+        assert np.max(np.abs(pred[0][sig][:, 0] - rep.simulated[sig])) < 0.02 * scale, sig
