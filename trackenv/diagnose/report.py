@@ -86,12 +86,18 @@ def overlay(diag, j: int, path: Path) -> Path:
     sigs = [s for s in ("i_left", "i_right", "speed_ideal", "yaw_rate", "heading") if s in test.measured]
     fig, axes = plt.subplots(len(sigs) + 1, 1, figsize=(8, 1.7 * (len(sigs) + 1)), sharex=True)
     ax = axes[0]
-    ax.plot(test.t, test.volts[:, 0], label="v_left")
-    ax.plot(test.t, test.volts[:, 1], label="v_right")
-    ax.set_ylabel("V [V]")
+    if test.drive_kind == "speed":  # the prescribed speeds, on the back-emf voltage scale the phases use
+        ax.plot(test.t, test.drive_values[:, 0], label="omega_left (input)")
+        ax.plot(test.t, test.drive_values[:, 1], label="omega_right (input)")
+        ax.set_ylabel("ω [rad/s]")
+    else:
+        ax.plot(test.t, test.volts[:, 0], label="v_left")
+        ax.plot(test.t, test.volts[:, 1], label="v_right")
+        ax.set_ylabel("V [V]")
     ax.legend(fontsize=7, ncol=2)
     for ax, sig in zip(axes[1:], sigs):
-        ax.plot(test.t, test.measured[sig], color="0.55", lw=0.8, label="measured (log)")
+        ax.plot(test.t, test.measured[sig], color="0.55", lw=0.8,
+                label="MEASURED (log)" if test.log.meta.get("measured") is True else "measured (log)")
         ax.plot(test.t, base[sig], color="tab:blue", lw=1.2, label="base model")
         if after_name != "none":
             ax.plot(test.t, after[sig], color="tab:red", lw=1.2, label=f"+ {after_name} (held out)")
