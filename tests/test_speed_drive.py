@@ -13,7 +13,12 @@ import pytest
 
 import trackenv as te
 
-jax.config.update("jax_enable_x64", True)
+
+@pytest.fixture(autouse=True)
+def _float64():
+    """float64 for this file's tests only (jax_enable_x64 is process-global; the suite runs float32)."""
+    with jax.enable_x64(True):
+        yield
 
 PROFILE = [[0, 0, 0], [0.3, 11.8, 11.8], [3.0, 11.8, 11.8], [3.3, 14.0, 6.0], [6.0, 14.0, 6.0]]
 
