@@ -94,3 +94,21 @@ def test_power_terms_match_hand_formulas(energies):
     moving = np.abs(w) > 0.05
     np.testing.assert_allclose(pb["friction"][moving.all(axis=1)],
                                ((b * w + tau * np.sign(w)) * w).sum(axis=1)[moving.all(axis=1)], rtol=1e-9)
+
+
+@pytest.mark.parametrize("terrain", ["asphalt", "sandy_loam_1"])
+def test_energy_balance_closes_on_the_wheeled_husky(terrain):
+    """Two tyre patches per side and a gear efficiency of 0.7: the balance still closes, and the gear loss
+    shows as a negative conversion term ((alpha - alpha_v) i omega with alpha = eta K_t G_r < alpha_v)."""
+    p = te.load_params(terrain, vehicle="husky", dtype=jnp.float64)
+    traj = te.simulate(p, te.VoltageProfile.from_breakpoints(TURN, dtype=jnp.float64), T_END, dt=0.001, substep=0.001)
+    pb = jax.vmap(lambda s, v: power_balance(s, v, p))(traj.state, traj.voltage)
+    pb = {k: np.asarray(v, np.float64) for k, v in pb._asdict().items()}
+    t = np.asarray(traj.t, np.float64)
+    e = {k: np.trapezoid(v, t) for k, v in pb.items() if k != "stored"}
+    e["delta_stored"] = pb["stored"][-1] - pb["stored"][0]
+    assert e["electrical"] > 50.0
+    assert abs(imbalance(e)) < 1e-3, imbalance(e)
+    assert e["conversion"] < -0.05 * e["electrical"]  # the gear loses a sizeable share
+    without_gear_loss = dict(e, conversion=0.0)
+    assert abs(imbalance(without_gear_loss)) > 1e-2  # and the balance needs it

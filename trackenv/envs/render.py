@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..physics.geometry import patch_centres
 from .tasks.base import FOOTPRINT_LENGTH, FOOTPRINT_WIDTH
 
 WIDTH, HEIGHT, DPI = 640, 480, 100
@@ -70,9 +71,11 @@ class Renderer:
         ax.add_patch(Polygon(box(0.0, 0.0, FOOTPRINT_LENGTH, FOOTPRINT_WIDTH), closed=True, fc="0.85", ec="k", lw=1))
         veh = params.sim.vehicle
         gauge, length, tw = float(veh.track_gauge), float(veh.contact_length), float(veh.track_width)
+        centres = np.ravel(np.asarray(patch_centres(veh, 0), float))  # one track, or one patch per tyre
         for k, side in enumerate((1.0, -1.0)):
             col = "tab:red" if current[k] >= 0 else "tab:blue"
-            ax.add_patch(Polygon(box(0.0, side * gauge / 2, length, tw), closed=True, fc=col, ec="k", lw=0.5))
+            for cx in centres:
+                ax.add_patch(Polygon(box(cx, side * gauge / 2, length, tw), closed=True, fc=col, ec="k", lw=0.5))
         nose = np.array([x, y]) + 0.45 * np.array([c, s])
         ax.plot([x, nose[0]], [y, nose[1]], color="k", lw=1.5)
 
