@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT))
 
 from trackenv.calibrate import NaiveBaseline, calibrate, evaluate, write_vehicle_config  # noqa: E402
 from trackenv.compare import json_clean  # noqa: E402
+from trackenv.diagnose.data import load_tests  # noqa: E402
 from trackenv.importers.borealtc import import_borealtc  # noqa: E402
 from trackenv.replay import replay  # noqa: E402
 
@@ -96,21 +97,6 @@ def _figure(rows: list[dict], path: Path) -> Path:
     return path
 
 
-def _naive_predictions(base: NaiveBaseline, log: Path) -> dict:
-    from trackenv.diagnose.data import load_tests
-
-    (t,), _ = load_tests(log)
-    from trackenv.calibrate import _radius_gauge
-
-    radius, gauge = _radius_gauge(t, None)
-    v = t.drive_values * radius
-    turn = np.abs(v[:, 1] - v[:, 0])
-    one = np.ones_like(turn)
-    return {"i_left": base.current @ np.stack([one, np.abs(v[:, 0]), turn]),
-            "i_right": base.current @ np.stack([one, np.abs(v[:, 1]), turn]),
-            "yaw_rate": base.chi * (v[:, 1] - v[:, 0]) / gauge, "measured": t.measured}
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dataset", default=str(ROOT / "data" / "measured" / "borealtc"))
@@ -157,16 +143,15 @@ def main(argv=None) -> int:
         cal = calibrate(train, PARAMETERS, signals=SIGNALS, max_nfev=args.max_nfev, progress=False)
         base_ev = evaluate([held], {}, signals=SIGNALS)
         cal_ev = evaluate([held], cal.values, signals=SIGNALS)
-        naive = NaiveBaseline.fit(train)
-        naive_ev = naive.evaluate([held])
-        npred = _naive_predictions(naive, held)
+        naive_ev = NaiveBaseline.fit(train).evaluate([held])
         name = held.name
+        (held_test,), _ = load_tests(held)
         rows.append({"run": name, "train": [p.name for p in train], "values": cal.values, "at_bound": cal.at_bound,
                      "base": _mean_nrmse(base_ev, name), "calibrated": _mean_nrmse(cal_ev, name),
                      "naive": _mean_nrmse(naive_ev, name), "rmse_calibrated": cal_ev.rmse[name],
                      "rmse_naive": naive_ev.rmse[name], "t": cal_ev.predictions[name]["t"],
                      "base_pred": base_ev.predictions[name], "cal_pred": cal_ev.predictions[name],
-                     "naive_pred": npred, "measured": npred["measured"]})
+                     "naive_pred": naive_ev.predictions[name], "measured": held_test.measured})
         print(f"held out {name}: NRMSE configs {rows[-1]['base']}, calibrated {rows[-1]['calibrated']}, "
               f"naive {rows[-1]['naive']}")
     final = calibrate(asphalt, PARAMETERS, signals=SIGNALS, max_nfev=args.max_nfev, progress=False)

@@ -24,6 +24,7 @@ derivatives erratic (the diagnosis's polish makes the same choice).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -179,14 +180,8 @@ def _load(logs, where: str) -> list[TestData]:
         tests.extend(found)
     names = [t.name for t in tests]
     if len(set(names)) != len(names):
-        tests = [dataclass_replace_name(t, f"{t.folder.parent.name}/{t.name}") for t in tests]
+        tests = [dataclasses.replace(t, name=f"{t.folder.parent.name}/{t.name}") for t in tests]
     return tests
-
-
-def dataclass_replace_name(t: TestData, name: str) -> TestData:
-    import dataclasses  # noqa: PLC0415
-
-    return dataclasses.replace(t, name=name)
 
 
 def _check_bounds(parameters: dict) -> dict:
@@ -209,13 +204,7 @@ def evaluate(logs: Sequence[str | Path], values: dict, *, signals: Sequence[str]
     """Errors of the parameter set ``values`` (dotted name -> SI value; ``{}``: the configs as they are) on ``logs``
     (field-log folders, or folders of them): NRMSE and RMSE per log and channel."""
     tests = _load(logs, "evaluate")
-    prob = _Problem(tests, list(values), signals, vehicle, substep)
-    return prob.evaluation(values) if values else _base_evaluation(prob)
-
-
-def _base_evaluation(prob: _Problem) -> Evaluation:
-    prob.names = []
-    return prob.evaluation({})
+    return _Problem(tests, list(values), signals, vehicle, substep).evaluation(values)
 
 
 def calibrate(logs: Sequence[str | Path], parameters: dict, *, signals: Sequence[str] = DEFAULT_SIGNALS,
@@ -343,15 +332,21 @@ class NaiveBaseline:
         k, y = np.concatenate(kin), np.concatenate(yaw)
         return cls(coef, float(k @ y / max(k @ k, 1e-12)), gauge)
 
+    def predict(self, t: TestData, vehicle=None) -> dict:
+        """The baseline's |i_left|, |i_right| [A] and yaw rate [rad/s] at a speed-mode log's samples, (K,) each."""
+        radius, gauge = _radius_gauge(t, vehicle)
+        v, turn = self._features(t, radius)
+        one = np.ones_like(turn)
+        return {"i_left": self.current @ np.stack([one, np.abs(v[:, 0]), turn]),
+                "i_right": self.current @ np.stack([one, np.abs(v[:, 1]), turn]),
+                "yaw_rate": self.chi * (v[:, 1] - v[:, 0]) / gauge}
+
     def evaluate(self, logs: Sequence[str | Path], vehicle=None) -> Evaluation:
         """NRMSE and RMSE per log and channel, as :func:`evaluate` reports them for the simulator."""
-        nrmse, rmse, cost = {}, {}, 0.0
+        nrmse, rmse, cost, preds = {}, {}, 0.0, {}
         for t in _load(logs, "baseline"):
-            radius, gauge = _radius_gauge(t, vehicle)
-            v, turn = self._features(t, radius)
-            pred = {"i_left": self.current @ np.stack([np.ones_like(turn), np.abs(v[:, 0]), turn]),
-                    "i_right": self.current @ np.stack([np.ones_like(turn), np.abs(v[:, 1]), turn]),
-                    "yaw_rate": self.chi * (v[:, 1] - v[:, 0]) / gauge}
+            pred = self.predict(t, vehicle)
+            preds[t.name] = {"t": t.t, **pred}
             mask = t.fit_mask if t.fit_mask is not None else np.ones(len(t.t), bool)
             nrmse[t.name], rmse[t.name] = {}, {}
             for sig in DEFAULT_SIGNALS:
@@ -360,7 +355,8 @@ class NaiveBaseline:
                     e = float(np.sqrt(np.mean((pred[sig][ok] - t.measured[sig][ok]) ** 2)))
                     rmse[t.name][sig], nrmse[t.name][sig] = e, e / t.span[sig]
                     cost += (e / t.span[sig]) ** 2
-        return Evaluation({"current": self.current.tolist(), "chi": self.chi}, nrmse, rmse, float(cost))
+        return Evaluation({"current": self.current.tolist(), "chi": self.chi}, nrmse, rmse, float(cost),
+                          predictions=preds)
 
 
 def _radius_gauge(t: TestData, vehicle) -> tuple[float, float]:

@@ -185,7 +185,7 @@ def log_drive(log, params) -> tuple[str, np.ndarray]:
     ``params``'s vehicle on its terrain (:func:`trackenv.physics.geometry.belt_radius`), the radius the
     model's belt speed V_t = r_s' omega uses; ``omega_*`` columns are taken as they are.
     """
-    if getattr(log, "input_mode", "voltage") == "voltage":
+    if log.input_mode == "voltage":
         return "voltage", np.asarray(log.volts, np.float64)
     from .physics.geometry import belt_radius  # noqa: PLC0415
 

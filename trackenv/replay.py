@@ -274,7 +274,7 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
         "synthetic": True, "simulated": True,
         "source": f"trackenv replay of the field log {log.folder} (simulated with the "
                   f"{'voltages' if mode == 'voltage' else 'measured speeds'} of its log.csv; not measured data)",
-        "input_mode": mode, "input_mode_reason": getattr(log, "input_mode_reason", "voltage columns"),
+        "input_mode": mode, "input_mode_reason": log.input_mode_reason,
         "replay_of": str(log.folder), "replay_of_synthetic": log.synthetic,
         "internal_resistance": internal or "constant", "effects": effect_names,
         "t_offset_s": t_offset, "dt_sim_s": dt_sim, "substep_s": substep,

@@ -153,7 +153,7 @@ def prepare_test(log: FieldLog, name: str) -> TestData:
 def _drive(log: FieldLog) -> tuple[str, np.ndarray, np.ndarray]:
     """(kind, drive input, voltage-like series for the phases): in speed mode the phases are cut on the
     back-emf voltage alpha_v omega, which has the voltage's scale and zero where the drive is at rest."""
-    if getattr(log, "input_mode", "voltage") == "voltage":
+    if log.input_mode == "voltage":
         return "voltage", log.volts, log.volts
     from ..params import load_params  # noqa: PLC0415
 
