@@ -84,9 +84,7 @@ class VoltageProfile(eqx.Module):
         t = np.asarray(t, dtype=np.float64)
         volts = np.asarray(volts, dtype=np.float64)
         validate_profile(t, volts, source=source)
-        if t.shape[0] == 1:  # a single sample: hold it
-            t = np.concatenate([t, t + 1.0])
-            volts = np.concatenate([volts, volts])
+        t, volts = _hold_single_sample(t, volts)
         return cls(jnp.asarray(t, dtype), jnp.asarray(volts, dtype))
 
     @classmethod
@@ -119,9 +117,7 @@ class SpeedProfile(eqx.Module):
         t = np.asarray(t, dtype=np.float64)
         omega = np.asarray(omega, dtype=np.float64)
         validate_speeds(t, omega, source=source)
-        if t.shape[0] == 1:
-            t = np.concatenate([t, t + 1.0])
-            omega = np.concatenate([omega, omega])
+        t, omega = _hold_single_sample(t, omega)
         return cls(jnp.asarray(t, dtype), jnp.asarray(omega, dtype))
 
     def __call__(self, t):
@@ -129,18 +125,34 @@ class SpeedProfile(eqx.Module):
         return interpolate(self.t, self.omega, t)
 
 
+def _check_times(t, values, what: str, source: str) -> None:
+    """Shapes of a profile (``values`` (K, 2[, batch]) for K times) and its times: finite, strictly increasing."""
+    if t.ndim != 1 or t.shape[0] < 1:
+        raise ValueError(f"{source}: time must be a 1-D array with at least one sample, got shape {t.shape}")
+    if values.ndim < 2 or values.shape[0] != t.shape[0] or values.shape[1] != 2:
+        raise ValueError(
+            f"{source}: {what} must have shape (K, 2[, batch]) with K = {t.shape[0]} samples, got {values.shape}"
+        )
+    if not np.all(np.isfinite(t)):
+        k = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise ValueError(f"{source}: time is not finite at sample {k} (t = {t[k]})")
+    bad = np.diff(t) <= 0
+    if np.any(bad):
+        k = int(np.flatnonzero(bad)[0]) + 1
+        raise ValueError(f"{source}: time is not strictly increasing at sample {k} (t = {t[k - 1]} then {t[k]})")
+
+
+def _hold_single_sample(t, values):
+    """A one-sample profile held: a second sample 1 s later with the same values."""
+    if t.shape[0] == 1:
+        return np.concatenate([t, t + 1.0]), np.concatenate([values, values])
+    return t, values
+
+
 def validate_speeds(t, omega, limit: float | None = None, source: str = "speed profile") -> None:
     """Raise ``ValueError`` naming the sample and channel for a bad speed profile; ``limit``: largest
     |omega| [rad/s] accepted (default: none)."""
-    if t.ndim != 1 or t.shape[0] < 1:
-        raise ValueError(f"{source}: time must be a 1-D array with at least one sample, got shape {t.shape}")
-    if omega.ndim < 2 or omega.shape[0] != t.shape[0] or omega.shape[1] != 2:
-        raise ValueError(
-            f"{source}: speeds must have shape (K, 2[, batch]) with K = {t.shape[0]} samples, got {omega.shape}")
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        k = int(np.flatnonzero(~np.isfinite(t))[0]) if not np.all(np.isfinite(t)) else \
-            int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        raise ValueError(f"{source}: time is not finite and strictly increasing at sample {k}")
+    _check_times(t, omega, "speeds", source)
     for ch, name in enumerate(("omega_left", "omega_right")):
         w = omega[:, ch]
         bad = ~np.isfinite(w) if limit is None else ~(np.abs(w) <= limit)
@@ -158,19 +170,7 @@ def validate_profile(t, volts, limit: float | None = None, source: str = "profil
         from .params import vehicle_voltage_limit  # noqa: PLC0415
 
         limit = vehicle_voltage_limit("packbot")
-    if t.ndim != 1 or t.shape[0] < 1:
-        raise ValueError(f"{source}: time must be a 1-D array with at least one sample, got shape {t.shape}")
-    if volts.ndim < 2 or volts.shape[0] != t.shape[0] or volts.shape[1] != 2:
-        raise ValueError(
-            f"{source}: voltages must have shape (K, 2[, batch]) with K = {t.shape[0]} samples, got {volts.shape}"
-        )
-    if not np.all(np.isfinite(t)):
-        k = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise ValueError(f"{source}: time is not finite at sample {k} (t = {t[k]})")
-    bad = np.diff(t) <= 0
-    if np.any(bad):
-        k = int(np.flatnonzero(bad)[0]) + 1
-        raise ValueError(f"{source}: time is not strictly increasing at sample {k} (t = {t[k - 1]} then {t[k]})")
+    _check_times(t, volts, "voltages", source)
     for ch, name in enumerate(("v_left", "v_right")):
         v = volts[:, ch]
         nonfinite = ~np.isfinite(v)
