@@ -50,17 +50,24 @@ def test_split_simulation_matches_one_device(monkeypatch):
 
 
 def test_split_vector_env_matches_one_device(monkeypatch):
+    """The batched program (XLA partitions it) agrees to rounding; the default row loop (the same
+    single-device program on each device's rows) bit for bit."""
     if len(parallel.cpu_devices()) < 2:
         pytest.skip("one host device")
-    out = {}
-    for per in (2, 10**9):
-        monkeypatch.setattr(parallel, "MIN_PER_DEVICE", per)
-        venv = TrackVectorEnv("go_stop", 4, autoreset_mode="same_step", substep=0.002)
-        venv.reset(seed=3)
-        a = np.array([[11.8, 11.8], [6, 6], [20, 20], [0, 3]], np.float32)
-        for _ in range(3):
-            obs, rew, *_ = venv.step(a)
-        out[per] = (obs, rew, jax.tree.leaves(venv._sf)[0].sharding.device_set)
-    assert len(out[2][2]) == 2 and len(out[10**9][2]) == 1
-    np.testing.assert_allclose(out[2][0], out[10**9][0], rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(out[2][1], out[10**9][1], rtol=1e-5, atol=1e-5)
+    a = np.array([[11.8, 11.8], [6, 6], [20, 20], [0, 3]], np.float32)
+    for batching, threshold in (("vmap", "MIN_PER_DEVICE"), ("loop", "MIN_ROWS_PER_DEVICE")):
+        out = {}
+        for per in (2, 10**9):
+            monkeypatch.setattr(parallel, threshold, per)
+            venv = TrackVectorEnv("go_stop", 4, autoreset_mode="same_step", substep=0.002, physics_batching=batching)
+            venv.reset(seed=3)
+            for _ in range(3):
+                obs, rew, *_ = venv.step(a)
+            out[per] = (obs, rew, jax.tree.leaves(venv._sf)[0].sharding.device_set)
+        assert len(out[2][2]) == 2 and len(out[10**9][2]) == 1, batching
+        if batching == "loop":
+            np.testing.assert_array_equal(out[2][0], out[10**9][0])
+            np.testing.assert_array_equal(out[2][1], out[10**9][1])
+        else:
+            np.testing.assert_allclose(out[2][0], out[10**9][0], rtol=1e-5, atol=1e-5)
+            np.testing.assert_allclose(out[2][1], out[10**9][1], rtol=1e-5, atol=1e-5)

@@ -11,6 +11,10 @@ when ``trackenv`` is imported) therefore sets it only if the backends are not ye
 device, and batches then run on one core (nothing else changes). ``TRACKENV_HOST_DEVICES=1`` opts out.
 Single vehicles and small batches stay on the default device (one core): splitting them costs more
 than it gains (:data:`MIN_PER_DEVICE`).
+
+A program that must compute every vehicle exactly as it computes one (the vector env's row loop,
+:mod:`trackenv.envs.rows`) is not partitioned by XLA but run as the same single-device program on each
+device's share of the rows (:func:`run_split`, from :data:`MIN_ROWS_PER_DEVICE` rows per device).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import os
 
 MIN_PER_DEVICE = 256  # vehicles per core below which a batch is not split (measured, README Performance)
+MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8
 
 
@@ -54,14 +59,15 @@ def cpu_devices():
     return [d for d in jax.devices() if d.platform == "cpu"] or jax.devices()
 
 
-def split_count(batch: int) -> int:
+def split_count(batch: int, min_per_device: int | None = None) -> int:
     """How many devices a batch of ``batch`` vehicles is split over (1: not split).
 
-    All host devices when every one gets at least ``MIN_PER_DEVICE`` vehicles and the batch divides
-    evenly, else 1.
+    All host devices when every one gets at least ``min_per_device`` (default ``MIN_PER_DEVICE``)
+    vehicles and the batch divides evenly, else 1.
     """
     n = len(cpu_devices())
-    if n <= 1 or batch < n * MIN_PER_DEVICE or batch % n:
+    per = MIN_PER_DEVICE if min_per_device is None else min_per_device
+    if n <= 1 or batch < n * per or batch % n:
         return 1
     return n
 
@@ -97,3 +103,41 @@ def shard(tree, batch: int, axis: int = -1):
         return jax.device_put(x, NamedSharding(mesh, PartitionSpec()))
 
     return jax.tree.map(put, tree)
+
+
+def run_split(fn, rows: tuple, shared: tuple, n: int) -> tuple:
+    """``fn(*rows, *shared)`` with the rows split over the first ``n`` host devices.
+
+    Unlike :func:`shard`, XLA does not partition ``fn``: the same single-device program (one jitted
+    ``fn``, compiled once per device) runs on each device's share of the rows, asynchronously, so each
+    row is computed exactly as in an unsplit call. ``rows``: arrays (numpy, or jax arrays as this
+    function returns them) with the same leading row axis, whose length ``n`` divides; ``shared``:
+    arguments every device gets whole; ``n``: from ``split_count(rows, MIN_ROWS_PER_DEVICE)`` (1: one
+    call on the default device). Returns ``fn``'s outputs (each with a leading row axis), joined into
+    arrays split over the devices.
+    """
+    if n == 1:
+        return fn(*rows, *shared)
+    import jax
+    import numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+    devices = cpu_devices()[:n]
+    batch = rows[0].shape[0]
+    m = batch // n
+
+    def part(x, k, device):
+        if isinstance(x, jax.Array) and len(x.sharding.device_set) == n:
+            for s in x.addressable_shards:
+                if s.device == device:
+                    return s.data
+        return jax.device_put(np.asarray(x)[k * m:(k + 1) * m], device)
+
+    outs = [fn(*(part(x, k, d) for x in rows), *(jax.device_put(x, d) for x in shared)) for k, d in enumerate(devices)]
+    mesh = Mesh(np.array(devices), ("vehicles",))
+
+    def join(parts):
+        spec = PartitionSpec("vehicles", *([None] * (parts[0].ndim - 1)))
+        return jax.make_array_from_single_device_arrays((batch,) + parts[0].shape[1:], NamedSharding(mesh, spec),
+                                                        list(parts))
+
+    return tuple(join(parts) for parts in zip(*outs))

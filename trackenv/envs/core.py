@@ -370,7 +370,7 @@ def step(state: EnvState, action, params: EnvParams) -> tuple[EnvState, StepResu
 AUTORESET_MODES = ("next_step", "same_step", "disabled")
 
 
-def step_autoreset(state: EnvState, action, params: EnvParams, mode: str) -> tuple[EnvState, StepResult, StepResult]:
+def step_autoreset(state: EnvState, action, params: EnvParams, mode) -> tuple[EnvState, StepResult, StepResult]:
     """One step with Gymnasium's autoreset semantics for one environment (vmap it for a batch).
 
     - ``same_step``: an episode that ends is reset in the same call; the returned result carries the
@@ -380,30 +380,39 @@ def step_autoreset(state: EnvState, action, params: EnvParams, mode: str) -> tup
       reward 0, flags False).
     - ``disabled``: plain :func:`step`; the caller resets.
 
+    ``mode`` is one of :data:`AUTORESET_MODES`, or its index there as an int32 scalar array: then the
+    mode is a runtime value and one compiled program serves all three (the reset is computed every
+    step and selected).
+
     Returns (state, result, final); ``final`` is ``result`` except in same-step mode.
     """
-    if mode == "disabled":
-        new, out = step(state, action, params)
-        return new, out, out
-    if mode == "same_step":
-        new, out = step(state, action, params)
-        done = out.terminated | out.truncated
-        key, sub = jax.random.split(new.key)
+    if isinstance(mode, str):
+        if mode not in AUTORESET_MODES:
+            raise ValueError(f"autoreset mode must be one of {AUTORESET_MODES}, got {mode!r}")
+        if mode == "disabled":
+            new, out = step(state, action, params)
+            return new, out, out
+        mode = AUTORESET_MODES.index(mode)
+    same = mode == AUTORESET_MODES.index("same_step")
+    nxt = mode == AUTORESET_MODES.index("next_step")
+    key, sub = jax.random.split(state.key)
+    new, out = step(state, action, params)
+    reset_same = same & (out.terminated | out.truncated)  # same_step: the episode that just ended
+    reset_next = nxt & state.done  # next_step: the episode ended at the previous step
+    kept = eqx.tree_at(lambda s: s.key, new, jnp.where(same, key, new.key))  # same_step draws a key every step
+
+    def fresh_episode():
         fresh, first = reset(sub, params)
-        fresh = eqx.tree_at(lambda s: s.key, fresh, key)
-        merged = _tree_where(done, fresh, eqx.tree_at(lambda s: s.key, new, key))
-        info = jax.tree.map(lambda a, b: jnp.where(done, a, b), first.info, out.info)
-        return merged, out._replace(obs=jnp.where(done, first.obs, out.obs), info=info), out
-    if mode == "next_step":
-        key, sub = jax.random.split(state.key)
-        fresh, first = reset(sub, params)
-        fresh = eqx.tree_at(lambda s: s.key, fresh, key)
-        new, out = step(state, action, params)
-        was_done = state.done
-        merged = _tree_where(was_done, fresh, new)
-        result = jax.tree.map(lambda a, b: jnp.where(was_done, a, b), first, out)
-        return merged, result, result
-    raise ValueError(f"autoreset mode must be one of {AUTORESET_MODES}, got {mode!r}")
+        return eqx.tree_at(lambda s: s.key, fresh, key), first
+
+    # computed only when needed (under vmap both branches run and are selected, as jnp.where would)
+    fresh, first = jax.lax.cond(reset_same | reset_next, fresh_episode, lambda: (kept, out))
+    merged = _tree_where(reset_same | reset_next, fresh, kept)
+    result = jax.tree.map(lambda a, b: jnp.where(reset_next, a, b), first, out)
+    result = result._replace(obs=jnp.where(reset_same, first.obs, result.obs),
+                             info=jax.tree.map(lambda a, b: jnp.where(reset_same, a, b), first.info, result.info))
+    final = jax.tree.map(lambda a, b: jnp.where(same, a, b), out, result)
+    return merged, result, final
 
 
 # ----------------------------------------------------------------------------------------------

@@ -3,6 +3,10 @@
 One environment is one vehicle. Each ``step`` makes exactly one call of a jitted function
 (physics + task + observation + reward + packing) and one device-to-host transfer of a single
 float32 vector, which is then split into the observation, the reward, the flags and ``info``.
+That function is the row program of :mod:`.rows` run on one row: the program every sub-environment of
+:class:`~trackenv.envs.vector.TrackVectorEnv` runs (default ``physics_batching="loop"``), so a vector
+env's sub-environment i reset with seed s + i plays bit for bit the episode this env plays after
+``reset(seed=s + i)`` with the same actions.
 The jitted functions are cached by structure and take the parameters as an argument (flattened to
 two vectors, see :mod:`.flat`), so every environment with the same structure (task, substeps, effects, randomised
 parameter names) shares one compiled
@@ -51,38 +55,14 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
-import jax
 import jax.numpy as jnp
 import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from . import core
+from . import core, rows
 from .core import ENV_DEFAULT_SUBSTEP
-from .flat import FlatCodec, codecs
-
-_FNS: dict = {}
-
-
-def jitted(scodec: FlatCodec, pcodec: FlatCodec):
-    """The jitted (reset, step) of one env structure, on flat state/params vectors (see ``flat``)."""
-    key = (scodec, pcodec)
-    if key not in _FNS:
-
-        def reset_fn(seed, pf, pi):
-            params = pcodec.unravel(pf, pi)
-            state, out = core.reset(jax.random.PRNGKey(seed), params)
-            sf, si = scodec.ravel(state)
-            return sf, si, core.pack(state, out, params)
-
-        def step_fn(sf, si, action, pf, pi):
-            params = pcodec.unravel(pf, pi)
-            state, out = core.step(scodec.unravel(sf, si), action, params)
-            sf, si = scodec.ravel(state)
-            return sf, si, core.pack(state, out, params)
-
-        _FNS[key] = (jax.jit(reset_fn), jax.jit(step_fn))
-    return _FNS[key]
+from .flat import codecs
 
 
 class Layout:
@@ -159,12 +139,15 @@ class TrackEnv(gym.Env):
         self.observation_space = spaces.Box(np.asarray(params.obs_low), np.asarray(params.obs_high), dtype=np.float32)
         self.obs_names = params.obs_names
         self._scodec, self._pcodec = codecs(params)
-        self._reset_fn, self._step_fn = jitted(self._scodec, self._pcodec)
+        self._reset_fn, self._step_fn = rows.jitted(self._scodec, self._pcodec)  # run on one row
         self._pf, self._pi = (jnp.asarray(v) for v in self._pcodec.ravel_host(params))
-        self._sf = self._si = None
+        self._one = jnp.asarray(1, jnp.int32)  # the row count
+        self._disabled = jnp.asarray(rows.mode_index("disabled"))  # no autoreset: reset() starts episodes
+        self._sf = self._si = None  # (1, n_float), (1, n_int): the state as the one row of a batch
         self._ended = None  # "terminated"/"truncated" once the episode has ended, until reset()
         self._layout = Layout(params, self._scodec.unravel_host(np.zeros(self._scodec.n_float, np.float32),
-                                                                np.zeros(self._scodec.n_int, np.int32)))
+                                                                np.zeros(self._scodec.n_int, np.int32)),
+                              final_obs=True)
         self._trail: list[tuple[float, float]] = []
         self._drawing = None
         self._last_info: dict | None = None
@@ -176,10 +159,11 @@ class TrackEnv(gym.Env):
         super().reset(seed=seed)
         if options:
             raise ValueError(f"reset options are not supported, got keys {sorted(options)}")
-        episode_seed = np.uint32(self.np_random.integers(0, 2**32 - 1, dtype=np.uint32))
-        self._sf, self._si, packed = self._reset_fn(episode_seed, self._pf, self._pi)
+        episode_seed = self.np_random.integers(0, 2**32 - 1, size=1, dtype=np.uint32)
+        sf, si = (np.zeros((1, n), dt) for n, dt in ((self._scodec.n_float, np.float32), (self._scodec.n_int, np.int32)))
+        self._sf, self._si, packed = self._reset_fn(sf, si, episode_seed, np.ones(1, bool), self._one, self._pf, self._pi)
         self._ended = None
-        host = np.array(packed)
+        host = np.array(packed)[0]
         obs, info = host[: self._layout.n_obs], self._layout.info_dict(host)
         if self.render_mode is not None:
             self._trail = [(0.0, 0.0)]
@@ -195,8 +179,9 @@ class TrackEnv(gym.Env):
                               f"{self._ended_time:g} s); call reset() first (Gymnasium: stepping a finished "
                               "episode is undefined)")
         a = self.check_action(action)
-        self._sf, self._si, packed = self._step_fn(self._sf, self._si, a, self._pf, self._pi)
-        host = np.array(packed)  # the one device-to-host transfer (a writable copy)
+        self._sf, self._si, packed = self._step_fn(self._sf, self._si, a[None], self._disabled, self._one,
+                                                   self._pf, self._pi)
+        host = np.array(packed)[0]  # the one device-to-host transfer (a writable copy)
         lay = self._layout
         obs = host[: lay.n_obs]
         info = lay.info_dict(host)
@@ -249,7 +234,7 @@ class TrackEnv(gym.Env):
         """The current :class:`~trackenv.envs.core.EnvState` as numpy arrays (a copy, for inspection)."""
         if self._sf is None:
             return None
-        return self._scodec.unravel_host(np.asarray(self._sf), np.asarray(self._si))
+        return self._scodec.unravel_host(np.asarray(self._sf)[0], np.asarray(self._si)[0])
 
 
 ENV_KEYWORDS = ("terrain", "effects", "control_dt", "substep", "render_mode", "domain_randomization",

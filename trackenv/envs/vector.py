@@ -1,8 +1,8 @@
 """Native batched environments: a ``gymnasium.vector.VectorEnv`` and a Stable-Baselines3 ``VecEnv``.
 
-:class:`TrackVectorEnv` steps N environments in **one** jitted call (``jax.vmap`` of the functional
-core with Gymnasium's autoreset built in) followed by **one** device-to-host transfer of an (N, K)
-float32 array::
+:class:`TrackVectorEnv` steps N environments in **one** jitted call (per host device) of the
+functional core with Gymnasium's autoreset built in, followed by **one** device-to-host transfer of
+an (N, K) float32 array::
 
     venv = gym.make_vec("trackenv/GoStop-v0", num_envs=1024, autoreset_mode="same_step")
     obs, info = venv.reset(seed=0)                   # env i starts as gym.make(...).reset(seed=0 + i)
@@ -17,14 +17,28 @@ float32 array::
   observation and ``info["final_info"]`` the final metrics, each with the ``_key`` masks;
 - ``"disabled"``: no autoreset; reset ended environments with ``reset(options={"reset_mask": mask})``.
 
-``physics_batching``: ``"vmap"`` (plain ``jax.vmap`` of the integrator), ``"native"`` (the vmapped
-step hands the physics to the integrator with the batch on the *last* axis of every array, docs/model.md §6,
-through ``jax.custom_batching.custom_vmap``) or ``"auto"`` (default: native from 256 environments).
+``physics_batching`` (how the N environments are computed):
+
+- ``"loop"`` (default): every environment is stepped by the single env's compiled program, one row
+  after another inside the jitted call (:mod:`.rows`); from 16 environments per host device the rows
+  are split over the devices, each running that same program (:func:`trackenv.parallel.run_split`).
+  Sub-environment i reset with seed s plays **bit for bit** the episode of
+  ``gym.make(...).reset(seed=s + i)`` driven by the same actions (observations, rewards, flags,
+  ``info`` and physical state), for every N. A step costs about N single-env steps;
+- ``"vmap"`` (plain ``jax.vmap`` of the integrator), ``"native"`` (the vmapped step hands the physics
+  to the integrator with the batch on the *last* axis of every array, docs/model.md §6, through
+  ``jax.custom_batching.custom_vmap``) or ``"auto"`` (vmap below 256 environments, native from 256,
+  split over the host devices from 256 per device): one batched program, 1.3-2.9x the throughput of
+  ``"loop"`` from 64 environments (README Performance), but XLA compiles its float32 arithmetic
+  differently for each batch shape, so a sub-environment only agrees with the single env to rounding
+  (~1e-7 after one step, growing to ~1-3 % of a channel's range within 1.5 s; README Reliability).
+  The training configs use ``"auto"``.
 
 ``info`` holds one array per metric (``success``, ``off_course``, ``diverged``, ``timeout``,
 ``time``, ``completion``, ``tracking_rmse``, ``energy``, ``episode_return``) with ``_key`` masks,
 and ``params`` (the randomised parameter values) when domain randomisation is on. The physical state
-is not transferred by default (it would be most of the transfer); pass ``info_state=True`` to get
+is not in ``info`` by default (the batched programs do not transfer it then, it would be most of the
+transfer; the row loop always packs it, one body for every use); pass ``info_state=True`` to get
 ``info["state"]`` (arrays with a leading N axis), or read :attr:`TrackVectorEnv.state` (device
 arrays) whenever needed.
 
@@ -46,13 +60,15 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..parallel import shard
-from . import core
+from .. import parallel
+from ..parallel import run_split, shard
+from . import core, rows
 from .core import ENV_DEFAULT_SUBSTEP
 from .flat import FlatCodec, codecs
 from .gym_env import Layout
 
 NATIVE_FROM = 256  # physics_batching="auto": batch-last layout from this many environments (docs/model.md §6)
+PHYSICS_BATCHING = ("loop", "vmap", "native", "auto")
 
 _MODES = {AutoresetMode.NEXT_STEP: "next_step", AutoresetMode.SAME_STEP: "same_step", AutoresetMode.DISABLED: "disabled"}
 
@@ -106,26 +122,30 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
 
 
 class TrackVectorEnv(VectorEnv):
-    """N PackBots on one task, stepped by one jitted, vmapped call (see the module docstring)."""
+    """N PackBots on one task, stepped by one jitted call per step (see the module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, task: str = "go_stop", num_envs: int = 8, *, autoreset_mode="next_step", info_state: bool = False,
                  terrain: str = "dry_sand", effects=(), control_dt: float = 0.05, substep: float = ENV_DEFAULT_SUBSTEP,
                  render_mode: str | None = None, domain_randomization=False, normalize_action: bool = False,
-                 vehicle: str = "packbot", internal_resistance: str = "constant", physics_batching: str = "auto",
+                 vehicle: str = "packbot", internal_resistance: str = "constant", physics_batching: str = "loop",
                  params: core.EnvParams | None = None, **task_kwargs):
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if physics_batching not in PHYSICS_BATCHING:
+            raise ValueError(f"physics_batching must be one of {PHYSICS_BATCHING}, got {physics_batching!r}")
         if physics_batching == "auto":  # measured on a 2-core CPU: native wins from a few hundred envs
             physics_batching = "native" if num_envs >= NATIVE_FROM else "vmap"
-        if params is None:
+        self.physics_batching = physics_batching
+        self._loop = physics_batching == "loop"
+        if params is None:  # the loop runs the single env's program: its parameters (physics unbatched)
             params = core.make_params(task, terrain=terrain, vehicle=vehicle, internal_resistance=internal_resistance,
                                       effects=effects, control_dt=control_dt, substep=substep,
                                       domain_randomization=domain_randomization, normalize_action=normalize_action,
-                                      physics_batching=physics_batching, **task_kwargs)
+                                      physics_batching="vmap" if self._loop else physics_batching, **task_kwargs)
         self.params = params
         self.task_name = params.task.name
         self.num_envs = int(num_envs)
@@ -143,12 +163,20 @@ class TrackVectorEnv(VectorEnv):
         self.obs_names = params.obs_names
         self._final = self._mode == "same_step"
         self._scodec, self._pcodec = codecs(params)
-        self._vreset, self._vreset_masked, self._vstep = jitted(self._scodec, self._pcodec)
         self._pf, self._pi = (jnp.asarray(v) for v in self._pcodec.ravel_host(params))
+        if self._loop:
+            self._reset_rows, self._step_rows = rows.jitted(self._scodec, self._pcodec)
+            self._row_devices = parallel.split_count(self.num_envs, parallel.MIN_ROWS_PER_DEVICE)
+            self._rows_shared = (np.int32(self.num_envs // self._row_devices), self._pf, self._pi)  # rows per call
+            self._mode_index = rows.mode_index(self._mode)
+        else:
+            self._vreset, self._vreset_masked, self._vstep = jitted(self._scodec, self._pcodec)
         self._sf = self._si = None
         self._last_host = None
         example = self._scodec.unravel_host(np.zeros(self._scodec.n_float, np.float32), np.zeros(self._scodec.n_int, np.int32))
-        self._layout = Layout(params, example, with_physics=self.info_state, final_obs=self._final)
+        # the row program packs everything (one compiled body for every use); the batched one what is asked
+        self._layout = Layout(params, example, with_physics=self.info_state or self._loop,
+                              final_obs=self._final or self._loop)
         self._trails: list[np.ndarray] = []
         self._renderers: dict[int, Any] = {}
 
@@ -178,19 +206,30 @@ class TrackVectorEnv(VectorEnv):
         mask = options.pop("reset_mask", None)
         if options:
             raise ValueError(f"unsupported reset options {sorted(options)} (only 'reset_mask')")
-        seeds = shard(self._seeds(seed), self.num_envs, axis=0)  # large batches: one half per core
+        seeds = self._seeds(seed)
         if mask is not None:
             mask = np.asarray(mask)
             if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
                 raise ValueError(f"options['reset_mask'] must be a bool array of shape ({self.num_envs},)")
             if self._sf is None:
                 raise RuntimeError("reset_mask needs a previous full reset()")
-            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, seeds, shard(mask, self.num_envs, 0),
+        if self._loop:
+            if mask is None:
+                sf = np.zeros((self.num_envs, self._scodec.n_float), np.float32)
+                si = np.zeros((self.num_envs, self._scodec.n_int), np.int32)
+            else:
+                sf, si = self._sf, self._si
+            self._sf, self._si, packed = run_split(
+                self._reset_rows, (sf, si, seeds, np.ones(self.num_envs, bool) if mask is None else mask),
+                self._rows_shared, self._row_devices)
+        elif mask is not None:
+            n = self.num_envs  # large batches: one half per core
+            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, shard(seeds, n, 0), shard(mask, n, 0),
                                                              self._pf, self._pi,
                                                              with_physics=self.info_state, final=self._final)
         else:
-            self._sf, self._si, packed = self._vreset(seeds, self._pf, self._pi, with_physics=self.info_state,
-                                                      final=self._final)
+            self._sf, self._si, packed = self._vreset(shard(seeds, self.num_envs, 0), self._pf, self._pi,
+                                                      with_physics=self.info_state, final=self._final)
         host = np.array(packed)
         if mask is not None:  # environments that were not reset keep their last observation and info
             host = np.where(mask[:, None], host, self._last_host)
@@ -220,9 +259,14 @@ class TrackVectorEnv(VectorEnv):
     def step(self, actions):
         if self._sf is None:
             raise RuntimeError("call reset() before step()")
-        a = shard(self.check_actions(actions), self.num_envs, axis=0)
-        self._sf, self._si, packed = self._vstep(self._sf, self._si, a, self._pf, self._pi, mode=self._mode,
-                                                 with_physics=self.info_state, final=self._final)
+        a = self.check_actions(actions)
+        if self._loop:
+            self._sf, self._si, packed = run_split(self._step_rows, (self._sf, self._si, a),
+                                                   (self._mode_index,) + self._rows_shared, self._row_devices)
+        else:
+            self._sf, self._si, packed = self._vstep(self._sf, self._si, shard(a, self.num_envs, axis=0),
+                                                     self._pf, self._pi, mode=self._mode,
+                                                     with_physics=self.info_state, final=self._final)
         host = np.array(packed)  # the one device-to-host transfer
         self._last_host = host
         lay = self._layout
@@ -303,7 +347,7 @@ class TrackVectorEnv(VectorEnv):
             dr = host[:, lay.dr]
             info["params"] = {p: dr[:, n].astype(np.float64) for n, p in enumerate(lay.dr_paths)}
             info["_params"] = present.copy()
-        if lay.physics:
+        if lay.physics and self.info_state:
             info["state"] = {name: host[:, sl].reshape((self.num_envs,) + shape) for name, sl, shape in lay.physics}
             info["_state"] = present.copy()
         return obs, info
