@@ -13,7 +13,9 @@ Prints Markdown tables for the README, every number from this one process run:
   derivative) under ``scipy.integrate.solve_ivp`` (LSODA, rtol 1e-6) on the same voltage log;
 - batches (vehicles on the last axis, docs/model.md §6) through ``te.simulate``, which splits large
   batches across the host devices (``trackenv.parallel``), and the same batch on one device;
-- GFLOP/s beside the machine's measured peak (a 2048^2 float32 matmul).
+- GFLOP/s beside the machine's measured peak (a 2048^2 float32 matmul);
+- the two forms of the contact-point sums (``trackenv.physics.sums``: XLA's ``reduce`` and unrolled
+  additions) per batch size, each compiled and timed in this process (``--sums`` prints only that table).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 import trackenv as te
 from trackenv import parallel
 from trackenv.integrate import current_coeffs, etdrk4_substep
+from trackenv.physics import sums
 from trackenv.physics.model import initial_state
 from trackenv.simulate import DEFAULT_SUBSTEP, n_substeps, simulate_core
 
@@ -87,6 +90,35 @@ def substep_kernels(params, batch: tuple, n_loop: int):
     return max(counts), flops, wall / n_loop * 1e6
 
 
+def sum_forms(params, batches, n_steps: int = 20, repeat: int = 7) -> None:
+    """Table: us / substep / vehicle with XLA's reduce and with unrolled sums, and the form the policy picks."""
+    substeps = n_substeps(DT, DEFAULT_SUBSTEP)
+    print("| vehicles | reduce: us / substep / vehicle | unrolled: us / substep / vehicle | unrolled / reduce speed-up "
+          "| form used |")
+    print("|---|---|---|---|---|")
+    keep = sums.UNROLL_MIN, sums.UNROLL_MAX
+    try:
+        for b in batches:
+            prof = go_stop_profile(b)
+            s0 = initial_state(params, (b,))
+            comps = []
+            for lo, hi in ((10**9, 10**9), (1, 10**9)):  # never unrolled, always unrolled
+                sums.UNROLL_MIN, sums.UNROLL_MAX = lo, hi
+                fresh = jax.jit(lambda *a, **k: simulate_core(*a, **k),  # a new function: JAX traces it anew
+                                static_argnames=("n_steps", "dt", "substeps"))
+                comps.append(fresh.lower(params, prof, s0, n_steps=n_steps, dt=DT, substeps=substeps).compile())
+            best = [np.inf, np.inf]
+            for _ in range(repeat):  # interleaved, so that a change of load hits both forms alike
+                for k, comp in enumerate(comps):
+                    best[k] = min(best[k], timed(lambda: comp(params, prof, s0), 1))
+            us = [w / (n_steps * substeps) / b * 1e6 for w in best]
+            sums.UNROLL_MIN, sums.UNROLL_MAX = keep
+            print(f"| {b} | {us[0]:.2f} | {us[1]:.2f} | {us[0] / us[1]:.2f} | "
+                  f"{'unrolled' if sums.unrolled(b) else 'reduce'} |", flush=True)
+    finally:
+        sums.UNROLL_MIN, sums.UNROLL_MAX = keep
+
+
 def scipy_seconds(params, t_end: float) -> float:
     rhs = numpy_model.make_rhs(params, ROWS[:, 0], ROWS[:, 1:])
     from scipy.integrate import solve_ivp
@@ -106,10 +138,15 @@ def main(argv=None):
     ap.add_argument("--batch-t-end", type=float, default=2.0, help="simulated seconds per batch run (first part of the go-stop)")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-scipy", action="store_true")
+    ap.add_argument("--sums", action="store_true", help="only the table of the two forms of the contact-point sums")
+    ap.add_argument("--sum-batches", type=int, nargs="*", default=[1, 8, 16, 64, 128, 256, 1024])
     args = ap.parse_args(argv)
     batches = args.batches if args.batches is not None else ((64, 256) if args.quick else (64, 256, 1024, 4096))
     params = te.load_params("dry_sand")
     substeps = n_substeps(DT, DEFAULT_SUBSTEP)
+    if args.sums:
+        sum_forms(params, args.sum_batches)
+        return
     print(f"machine: {platform.processor() or platform.machine()}, {len(parallel.cpu_devices())} host devices "
           f"(cores: {parallel._cores()}), jax {jax.__version__}; float32; substep {DT / substeps * 1e3:g} ms")
     peak = peak_gflops()
@@ -165,7 +202,8 @@ def main(argv=None):
         else:
             one = "(same) | 1"
         print(f"| {b} | {split} | {first - w:.1f} | {w:.2f} | {args.batch_t_end * b / w:,.0f} | {per:.3f} | {one} |", flush=True)
-    print("\n(compile s of a batch: first call minus a timed call.)")
+    print("\n(compile s of a batch: first call minus a timed call.)\n")
+    sum_forms(params, args.sum_batches)
 
 
 if __name__ == "__main__":

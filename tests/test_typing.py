@@ -31,16 +31,16 @@ import pytest
 
 from trackenv import integrate
 from trackenv.params import InternalResistance, Params, Terrain, Vehicle
-from trackenv.physics import body, contact, geometry, loads, model, motor, terramechanics
+from trackenv.physics import body, contact, geometry, loads, model, motor, sums, terramechanics
 
-MODULES = [terramechanics, geometry, contact, loads, body, motor, model, integrate]
+MODULES = [terramechanics, geometry, contact, loads, body, motor, model, sums, integrate]
 
 # (module name, function name) -> why it has no (complete) array annotation.
 EXCEPTIONS: dict[tuple[str, str], str] = {}
 
 # Non-array annotations an argument or result may have.
 ALLOWED_TYPES = {
-    int, type(None), Vehicle, Terrain, InternalResistance, Params,
+    int, bool, type(None), Vehicle, Terrain, InternalResistance, Params,
     model.State, model.Evaluation, model.PowerBalance, contact.Kinematics, contact.ContactForces,
     integrate.Coeffs,
 }

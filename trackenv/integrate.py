@@ -30,6 +30,7 @@ from .params import Params
 from .physics import contact
 from .physics.model import Evaluation, State, decay_rates, evaluate
 from .physics.motor import current_decay_rate, resistance_slope
+from .physics.sums import contact_sum
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series
 _TAYLOR_TERMS = 12
@@ -125,11 +126,12 @@ def diagonal_damping(
     dfl_ds = dfl_dj * state.jz * ds_z  # dF/ds = dF/dj' * j_z * dS/ds (chain rule through 3.17)
     dflat_dvy = dflat_dj * state.jx * ds_x
     dtau_dw = resistance_slope(veh, params.internal, state.omega)
-    traction = dfl_ds.sum(axis=1)  # (2, *b) dF_x,k/ds_k
+    nb = state.vel.ndim - 1
+    traction = contact_sum(dfl_ds, 1, nb)  # (2, *b) dF_x,k/ds_k
     lam_w = (dtau_dw + kin.belt_radius**2 * traction) / veh.drive_inertia
-    lam_u = traction.sum(axis=0) / veh.mass
-    lam_v = -dflat_dvy.sum(axis=(0, 1)) / veh.mass
-    lam_r = ((kin.y**2 * traction).sum(axis=0) - (kin.x**2 * dflat_dvy).sum(axis=(0, 1))) / veh.yaw_inertia
+    lam_u = contact_sum(traction, 0, nb) / veh.mass
+    lam_v = -contact_sum(dflat_dvy, (0, 1), nb) / veh.mass
+    lam_r = (contact_sum(kin.y**2 * traction, 0, nb) - contact_sum(kin.x**2 * dflat_dvy, (0, 1), nb)) / veh.yaw_inertia
     lam_vel = jnp.stack([lam_u, lam_v, lam_r])
     return jnp.maximum(lam_w, 0.0), jnp.maximum(lam_vel, 0.0)
 

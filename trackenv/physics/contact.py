@@ -16,6 +16,7 @@ from jaxtyping import Array, Float
 from ..params import Terrain, Vehicle
 from . import terramechanics as tm
 from .geometry import belt_radius, contact_area, contact_x, patch_edges, patch_x, per_point, track_y
+from .sums import contact_sum
 
 # Smoothing constants of Table C.1 (docs/model.md §2), SI.
 LEADING_EDGE_SPEED = 1e-2  # m/s, Delta V_z: below it the leading edge follows the ground speed
@@ -196,5 +197,5 @@ def compaction_force(
     per_element = tm.compaction_resistance(
         normal, kin.area, vehicle.contact_length, k, terrain.sinkage_exponent
     )
-    resistance = per_element.sum(axis=1) * terrain.deformable
+    resistance = contact_sum(per_element, 1, normal.ndim - 2) * terrain.deformable
     return -resistance * tm.smoothsign(kin.ground_speed, COMPACTION_SPEED_SMOOTHING)

@@ -17,6 +17,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..params import Params
 from . import body, contact, loads, motor
+from .sums import contact_sum
 
 
 class State(eqx.Module):
@@ -144,15 +145,16 @@ def evaluate(state: State, voltage: Float[Array, " 2 *b"], params: Params) -> Ev
         forces, tau_int = effect.forces(ctx, forces, tau_int)
 
     # Rigid body (docs/model.md §5)
-    track_fx = forces.longitudinal.sum(axis=1) + forces.compaction  # (2, *b)
-    force_x = track_fx.sum(axis=0) + forces.body_x
-    force_y = forces.lateral.sum(axis=(0, 1)) + forces.body_y
-    moment_z = (kin.x * forces.lateral).sum(axis=(0, 1)) - (kin.y * track_fx).sum(axis=0) + forces.body_yaw
+    track_long = contact_sum(forces.longitudinal, 1, nb)  # (2, *b)
+    track_fx = track_long + forces.compaction  # (2, *b)
+    force_x = contact_sum(track_fx, 0, nb) + forces.body_x
+    force_y = contact_sum(forces.lateral, (0, 1), nb) + forces.body_y
+    moment_z = contact_sum(kin.x * forces.lateral, (0, 1), nb) - contact_sum(kin.y * track_fx, 0, nb) + forces.body_yaw
     vel_rate = body.velocity_rate(veh, state.vel, force_x, force_y, moment_z)
     pose_rate = body.pose_rate(state.pose, state.vel)
 
     # Drive (4.1, 4.2)
-    tau_back = kin.belt_radius * forces.longitudinal.sum(axis=1)  # (3.22)
+    tau_back = kin.belt_radius * track_long  # (3.22)
     omega_rate = motor.sprocket_acceleration(veh, state.current, state.omega, tau_int, tau_back + forces.sprocket)
     current_drive = motor.current_drive(veh, voltage, state.omega)
     jz_drive, jx_drive = contact.shear_drive(kin)

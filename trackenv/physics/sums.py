@@ -1,0 +1,49 @@
+"""Sums over a vehicle's contact points and tracks, in the form XLA's CPU backend runs fastest.
+
+The model sums element arrays (2, N, *b) (track, contact point, vehicles last) over their first two
+axes: the track forces, the body force and moment (docs/model.md §5), the traction slopes of the
+integrator's damping. :func:`contact_sum` computes ``a.sum(axes)`` in one of two forms:
+
+- ``jnp.sum``: XLA's ``reduce``. For batches of :data:`UNROLL_MAX` vehicles and more, XLA's CPU
+  backend hands these reductions to YNNPACK kernels, and this is the fastest form; for a single
+  vehicle it is the form with the fewest kernels.
+- unrolled additions of the axis's slices, first to last: elementwise work that XLA fuses with the
+  arithmetic around it and vectorises along the vehicle axis. Between :data:`UNROLL_MIN` and
+  :data:`UNROLL_MAX` vehicles XLA emits the ``reduce`` inside its loop fusions, recomputing it for
+  every element of the fused output, and there the unrolled form is about 2x faster per vehicle
+  (measured by ``benchmarks/bench_simulate.py --sums``, README Performance). Below
+  :data:`UNROLL_MIN` vehicles (fewer than one vector register of float32 lanes) it is slower.
+
+The two forms add in different orders, so they agree to rounding (float32: ~1e-7 relative), not bit
+for bit; the form depends only on the batch size, so one batch shape always computes the same way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+UNROLL_MIN = 16  # vehicles: from here the unrolled form is the faster (measured, module docstring)
+UNROLL_MAX = 160  # vehicles: from here XLA's CPU backend runs the reductions as YNNPACK kernels
+
+
+def unrolled(batch: int) -> bool:
+    """Whether :func:`contact_sum` unrolls its sums for ``batch`` vehicles."""
+    return UNROLL_MIN <= batch < UNROLL_MAX
+
+
+def contact_sum(a: Float[Array, " ..."], axes: int | tuple[int, ...], nb: int) -> Float[Array, " ..."]:
+    """``a.sum(axes)`` over small leading axes (tracks, contact points) of an array with ``nb`` trailing
+    batch axes (the vehicles), in the faster form for its batch size (module docstring)."""
+    axes = (axes,) if isinstance(axes, int) else tuple(axes)
+    batch = math.prod(a.shape[a.ndim - nb:]) if nb else 1
+    if not unrolled(batch):
+        return jnp.sum(a, axis=axes)
+    for ax in sorted((ax % a.ndim for ax in axes), reverse=True):  # the highest first: lower indices stay valid
+        total = jnp.take(a, 0, axis=ax)
+        for i in range(1, a.shape[ax]):
+            total = total + jnp.take(a, i, axis=ax)
+        a = total
+    return a
