@@ -9,10 +9,10 @@ integrator's damping. :func:`contact_sum` computes ``a.sum(axes)`` in one of two
   vehicle it is the form with the fewest kernels.
 - unrolled additions of the axis's slices, first to last: elementwise work that XLA fuses with the
   arithmetic around it and vectorises along the vehicle axis. Between :data:`UNROLL_MIN` and
-  :data:`UNROLL_MAX` vehicles XLA emits the ``reduce`` inside its loop fusions, recomputing it for
-  every element of the fused output, and there the unrolled form is about 2x faster per vehicle
-  (measured by ``benchmarks/bench_simulate.py --sums``, README Performance). Below
-  :data:`UNROLL_MIN` vehicles (fewer than one vector register of float32 lanes) it is slower.
+  :data:`UNROLL_MAX` vehicles XLA emits the ``reduce`` inside its loop fusions, and the fusions that
+  hold it are the slowest of the substep (a profile per fusion, README Performance); there the unrolled
+  form is 1.45-2x faster per vehicle (``benchmarks/bench_simulate.py --sums``). Below
+  :data:`UNROLL_MIN` vehicles it is slower (measured the same way).
 
 The two forms add in different orders, so they agree to rounding (float32: ~1e-7 relative), not bit
 for bit; the form depends only on the batch size, so one batch shape always computes the same way.
