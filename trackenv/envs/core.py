@@ -408,10 +408,10 @@ def step_autoreset(state: EnvState, action, params: EnvParams, mode) -> tuple[En
     # computed only when needed (under vmap both branches run and are selected, as jnp.where would)
     fresh, first = jax.lax.cond(reset_same | reset_next, fresh_episode, lambda: (kept, out))
     merged = _tree_where(reset_same | reset_next, fresh, kept)
-    result = jax.tree.map(lambda a, b: jnp.where(reset_next, a, b), first, out)
+    result = _tree_where(reset_next, first, out)
     result = result._replace(obs=jnp.where(reset_same, first.obs, result.obs),
-                             info=jax.tree.map(lambda a, b: jnp.where(reset_same, a, b), first.info, result.info))
-    final = jax.tree.map(lambda a, b: jnp.where(same, a, b), out, result)
+                             info=_tree_where(reset_same, first.info, result.info))
+    final = _tree_where(same, out, result)
     return merged, result, final
 
 
