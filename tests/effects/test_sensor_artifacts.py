@@ -23,6 +23,21 @@ def test_bias_adds_exactly_and_rectified_nonnegative():
     assert np.all(np.asarray(base.channels["i_right"])[10:] < 0)  # signed before: rectification mattered
 
 
+def test_ammeter_offsets_and_gyro_scale_act_before_rectification():
+    """i_m = |i + c| per channel (an offset of the sensor, rectified with the current) and r_m = (1 + ε) r + β."""
+    base = sim("dry_sand", t_end=2.0)
+    e = get_effect("sensor_artifacts", window=0.0, gyro_bias=0.01, gyro_scale=0.1, current_offset_left=0.3,
+                   current_offset_right=-0.4)
+    tr = sim("dry_sand", (e,), t_end=2.0)
+    np.testing.assert_allclose(tr.channels["yaw_rate"], 1.1 * np.asarray(base.channels["yaw_rate"]) + 0.01, atol=1e-6)
+    for k, c in (("i_left", 0.3), ("i_right", -0.4)):
+        np.testing.assert_allclose(tr.channels[k], np.abs(np.asarray(base.channels[k]) + c), atol=1e-5)
+    # the default has no offset and no scale error: only the encoder window acts
+    d = sim("dry_sand", (get_effect("sensor_artifacts", window=0.0),), t_end=2.0)
+    np.testing.assert_allclose(d.channels["yaw_rate"], base.channels["yaw_rate"], atol=1e-7)
+    np.testing.assert_allclose(d.channels["i_left"], np.abs(np.asarray(base.channels["i_left"])), atol=1e-6)
+
+
 def test_moving_average_of_step_is_ramp():
     t = jnp.arange(0, 41) * 0.05  # 0..2 s
     s = jnp.where(t >= 1.0, 1.0, 0.0)  # piecewise linear: ramps 0.95 -> 1.0

@@ -15,6 +15,7 @@ shape), so every round of a fit reuses them.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -130,6 +131,7 @@ class BatchSimulator:
         self.b_int_constant = np.array([float(p.internal.constant) if float(p.internal.constant) > 0
                                         else float(p.vehicle.stiction_torque) for p in ref])
         self.n_vehicle_seconds = 0.0
+        self._on_channels = {}  # (bucket, candidate, names, values) -> channels of a fitted base (channels_on)
         self._base_channels = {}  # bucket index -> raw base-model channels on the output grid (T, nb)
         # interpolation of the output grid at each log's times
         self._interp: dict[int, SampleWeights] = {}
@@ -208,10 +210,32 @@ class BatchSimulator:
             self._base_channels[bi] = self._simulate(b, base, len(b.tests))
         return self._base_channels[bi][0]
 
+    def channels_on(self, bi: int, b: Bucket, below: Candidate, values: dict) -> dict:
+        """Raw channels (T, nb · S) of bucket ``bi`` under ``below`` with ``values`` {name: (S,)} (column
+        ``q · S + s``: test q, set s). Each distinct parameter set is simulated once and cached (a fit that
+        stands on ``below`` uses one set per fold)."""
+        names = sorted(values)
+        rows = np.stack([np.asarray(values[k], np.float64) for k in names], axis=1)  # (S, n)
+        uniq, inv = np.unique(rows, axis=0, return_inverse=True)
+        inv = np.ravel(inv)
+        key = (bi, below.name, tuple(names), uniq.tobytes())
+        if key not in self._on_channels:
+            U = uniq.shape[0]
+            params = self._params(b, below, {k: uniq[:, i] for i, k in enumerate(names)}, U)
+            self._on_channels[key] = (self._simulate(b, params, len(b.tests) * U)[0], U)
+        ch, U = self._on_channels[key]
+        cols = np.concatenate([q * U + inv for q in range(len(b.tests))])
+        return {k: v[:, cols] for k, v in ch.items()}
+
     def _instrument_only(self, bi: int, b: Bucket, cand: Candidate, values: dict, S: int) -> dict:
-        """An effect that only transforms instruments: apply it to the base trajectory, no new simulation."""
-        ch = {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
-        params = self._params(b, cand, values, S)
+        """An effect that only transforms instruments: apply it to the base trajectory (to the trajectory of
+        the candidate it stands on, :meth:`channels_on`), no new simulation."""
+        own, below = cand.split_values(values)
+        if cand.on is not None:
+            ch = self.channels_on(bi, b, cand.on, below)
+        else:
+            ch = {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
+        params = self._params(b, dataclasses.replace(cand, on=None), own, S)
         t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
         for eff in params.effects:
             ch = _instruments_jit(eff, {k: jnp.asarray(v, params.dtype) for k, v in ch.items()}, t, params)

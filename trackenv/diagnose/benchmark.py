@@ -39,6 +39,7 @@ def summarize(rows: list[dict]) -> dict:
     correct = [r for r in rows if r["verdict"] == r["label"]]
     nulls = [r for r in rows if r["label"] == NONE]
     shrink = [r["shrink"] for r in correct if r["label"] != NONE]
+    own = [r["own_shrink"] for r in correct if r["label"] != NONE and r.get("own_shrink") is not None]
     true_shrink = [r["true_effect_shrink"] for r in rows if r["label"] != NONE and r["true_effect_shrink"] is not None]
     return {
         "cases": n, "top1_accuracy": len(correct) / n if n else None,
@@ -48,6 +49,7 @@ def summarize(rows: list[dict]) -> dict:
         "effect_recall": (sum(r["verdict"] == r["label"] for r in rows if r["label"] != NONE) / (n - len(nulls)))
         if n > len(nulls) else None,
         "median_heldout_shrink_when_right": float(np.median(shrink)) if shrink else None,
+        "median_own_shrink_when_right": float(np.median(own)) if own else None,
         "median_heldout_shrink_of_true_effect": float(np.median(true_shrink)) if true_shrink else None,
         "median_wall_s": float(np.median([r["wall_s"] for r in rows])) if rows else None,
         "confusion": conf,
@@ -129,6 +131,7 @@ def _row(a: dict, v: dict, rank: dict, wall_s: float) -> dict:
     return {"case": a["case"], "label": a["label"], "verdict": v["effect"], "confidence": v["confidence"],
             "best_candidate": v["best_candidate"], "reason": v["reason"], "verdict_line": v.get("verdict_line", ""),
             "shrink": v["heldout_gap_shrink"], "insample_shrink": v.get("insample_gap_shrink"),
+            "own_shrink": v.get("heldout_gap_shrink_own"),
             "shrink_ci": v.get("heldout_gap_shrink_ci"), "gap_before": v["gap_before"],
             "gap_p": (v.get("gap_test") or {}).get("p"),
             "true_effect_shrink": rank[a["label"]]["heldout_gap_shrink"] if a["label"] in rank else None,
@@ -183,8 +186,9 @@ def run_benchmark(out_dir: str | Path, n_cases: int, seed: int = 0, null_fractio
     return _write(out, rows, seed, {"generation_s": t_gen, "total_s": time.perf_counter() - t0})
 
 
-def rescore(out_dir: str | Path, alpha: float | None = None, **rule) -> dict:
-    """Re-apply the verdict rule to every cached case of a benchmark (no fitting): the new summary."""
+def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True, **rule) -> dict:
+    """Re-apply the verdict rule to every cached case of a benchmark (no fitting): the new summary; with
+    ``write``, ``benchmark.{json,md}`` and the figures are rewritten from it."""
     from .core import ALPHA, decide, load_evidence
 
     out = Path(out_dir)
@@ -197,8 +201,13 @@ def rescore(out_dir: str | Path, alpha: float | None = None, **rule) -> dict:
         c = ev["candidates"]
         row.update({"verdict": v["effect"], "confidence": v["confidence"], "reason": v["reason"],
                     "shrink": c[v["effect"]]["heldout_shrink"] if v["effect"] != NONE else 0.0,
-                    "visibility": answers[row["case"]].get("max_visibility")})
+                    "own_shrink": v.get("own_shrink"), "visibility": answers[row["case"]].get("max_visibility")})
         rows.append(row)
+    if write:
+        old = json.loads((out / "benchmark.json").read_text()) if (out / "benchmark.json").exists() else {}
+        seed = old.get("seed", 0)
+        timing = {k: old.get("summary", {}).get(k) for k in ("generation_s", "total_s") if k in old.get("summary", {})}
+        _write(out, rows, seed, timing | {"rescored": True})
     return summarize(rows) | {"rows": rows}
 
 
@@ -220,24 +229,27 @@ def _write(out: Path, rows: list[dict], seed: int, timing: dict) -> dict:
     confusion_figure(summary, out / "confusion.png")
     power_figure(rows, out / "power.png")
     med = summary["median_heldout_shrink_when_right"]
+    own_med = summary.get("median_own_shrink_when_right")
     L = ["# Blind benchmark of `trackenv diagnose` (SYNTHETIC cases)", "",
          f"{summary['cases']} cases ({summary['null_cases']} null, {summary['near_limit_cases']} near the detection "
          f"limit), seed {seed}; effects in forms different from the candidate library (trackenv/diagnose/blind.py); "
          "labels withheld from the diagnosis.", "",
          f"- top-1 accuracy: **{summary['top1_accuracy']:.2f}**",
          f"- null false-positive rate: **{summary['null_false_positive_rate']}**",
-         f"- median held-out gap shrink when right: **{'–' if med is None else f'{med:.2f}'}**",
+         f"- median held-out gap shrink when right: **{'–' if med is None else f'{med:.2f}'}** (from the base model; "
+         f"the effect's own part, beyond recalibrating the base: {'–' if own_med is None else f'{own_med:.2f}'})",
          f"- near-limit effect cases named correctly: {summary['near_limit_recall']}",
          f"- by label (correct/cases): {', '.join(f'{k} {v}' for k, v in summary['by_label'].items())}",
          f"- median wall time per case: {summary['median_wall_s']:.0f} s", "",
          "![confusion](confusion.png) ![power](power.png)", "",
-         "| case | label | verdict | confidence | held-out shrink | in-sample shrink | size [σ] | tests | reason |",
-         "|---|---|---|---|---|---|---|---|---|"]
+         "| case | label | verdict | confidence | held-out shrink | own part | in-sample shrink | size [σ] | tests | reason |",
+         "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         vis = "–" if r.get("visibility") is None else f"{r['visibility']:.1f}" + (" (near limit)" if r.get("near_limit") else "")
         ins = "–" if r.get("insample_shrink") is None else f"{100 * r['insample_shrink']:.0f}%"
+        own = "–" if r.get("own_shrink") is None or r["verdict"] == NONE else f"{100 * r['own_shrink']:.0f}%"
         L.append(f"| {r['case']} | {r['label']} | {r['verdict']} | {r['confidence']:.2f} | {100 * r['shrink']:.0f}% | "
-                 f"{ins} | {vis} | {', '.join(r['maneuvers'])} ({r['terrain']}) | {r['reason']} |")
+                 f"{own} | {ins} | {vis} | {', '.join(r['maneuvers'])} ({r['terrain']}) | {r['reason']} |")
     (out / "benchmark.md").write_text("\n".join(L) + "\n", encoding="utf-8")
     return result
 

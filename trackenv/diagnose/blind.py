@@ -27,8 +27,8 @@ label (docs/model.md §8)              alternative form used here
                                  with a power-law weight |x|^q toward the track ends (library: 1st-order
                                  filtered a_x, Winkler-linear pressure gradient)
 ``sensor_artifacts``             random subset of: 1st-order low-pass on the encoder speed, gyro bias +
-                                 scale-factor error, ammeter offsets (library: moving-average window,
-                                 ripple + rectification, gyro bias only)
+                                 scale-factor error, ammeter offsets (library: moving-average window;
+                                 its gyro bias + scale and ammeter offsets have the same form)
 ================================ ========================================================================
 
 Every case also carries nuisance that a diagnosis must not mistake for an effect (null cases too):
@@ -429,8 +429,10 @@ class BlindSensorArtifacts(Effect):
     (IEEE Std 952-1997); Hall-effect current sensor offset. ``sample`` draws a non-empty random subset of
     the three (unused ones get neutral values).
 
-    Differs from the library's ``sensor_artifacts``: exponential (IIR) instead of moving-average (FIR)
-    encoder smoothing; a gyro scale-factor error; a DC ammeter offset instead of ripple.
+    Differs from the library's ``sensor_artifacts`` in the encoder smoothing only: exponential (IIR)
+    instead of moving-average (FIR). The gyro's bias and scale factor and the ammeters' zero offsets are
+    the standard instrument errors and have the same form in both, so a sensor case is a weaker test of
+    generality than the other labels.
     """
 
     id: ClassVar[str] = "blind_sensor_artifacts"

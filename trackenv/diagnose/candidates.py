@@ -8,6 +8,14 @@ range linearly or logarithmically (``ParamSpec``). Every candidate contains (a p
 model — its ``anchor`` — so a fit can only match or improve on ``none`` in-sample; whether it improves
 *out of sample* is what the diagnosis measures.
 
+An effect is normally fitted *on top of* the control (:meth:`Candidate.standing_on`): its base model is
+the base with the control's factors as fitted on the same fold, or the base itself, whichever branch
+fits the fold's calibration data better (:func:`.fit.fit_candidate`; the control can absorb part of a
+strong effect with the wrong physics, and the effect must not inherit that). The effect's family then
+contains the fitted control (its anchor, :meth:`Candidate.anchor_unit`), so "the effect beats the
+control" compares nested models, and a small perturbation of the soil or of b*_int (which the control
+absorbs) does not mask a weak effect or pass for one.
+
 Ranges are the physically plausible ones (the effect classes' ``bounds`` are wider, for users):
 
 - ``slip_sinkage``: k_s 0.02-3 1/m, k_b 0.05-5, z_max 0.01-0.1 m (γ, v_s: defaults);
@@ -21,8 +29,9 @@ Ranges are the physically plausible ones (the effect classes' ``bounds`` are wid
   convex (quadratic-like) or concave (a low-speed knee, tanh-like) laws;
 - ``grouser_stiction``: M0 0.5-30 N m, r_fade 0.1-5 rad/s, F0 0-60 N;
 - ``pitch_load_transfer``: height factor 0-3, τ 0.01-0.5 s;
-- ``sensor_artifacts``: encoder window 0-1 s, gyro bias ±0.1 rad/s (ripple is not fitted: a
-  ripple is indistinguishable from noise in an RMS comparison; rectification comes from meta.json);
+- ``sensor_artifacts``: encoder window 0-1 s, gyro bias ±0.2 rad/s and scale factor ±0.3, ammeter zero
+  offsets ±1.5 A per channel (ripple is not fitted: a ripple is indistinguishable from noise in an RMS
+  comparison; rectification comes from meta.json);
 - ``recalibrate_base``: factors on b*_int (and b_int; on the drive's stiction torque for a vehicle without
   internal resistance) 0.7-1.4, c 0.5-2, φ 0.9-1.1, K 0.5-2 (the
   plausible uncertainty of measured soil values; wider ranges let four parameters chase the noise of
@@ -69,6 +78,7 @@ class KnotInternalResistance(Effect):
 
 NONE = "none"
 RECALIBRATE = "recalibrate_base"
+ON = "on."  # prefix of the values of the candidate an effect stands on (:attr:`Candidate.on`)
 
 
 @dataclass(frozen=True)
@@ -100,6 +110,18 @@ class Candidate:
     specs: tuple
     anchor: dict  # physical values of the point closest to the base model
     description: str
+    on: Candidate | None = None  # fitted first; its per-fold values (keys prefixed ``ON``) form this one's base
+
+    def standing_on(self, below: Candidate) -> Candidate:
+        """This candidate fitted on top of ``below``'s fitted parameters (the values of a batch then carry
+        ``below``'s parameters under ``ON``-prefixed keys, one set per fold: :mod:`.fit`)."""
+        return dataclasses.replace(self, on=below)
+
+    def split_values(self, values: dict) -> tuple[dict, dict]:
+        """(own values, the ``on`` candidate's values with the prefix removed)."""
+        own = {k: v for k, v in values.items() if not k.startswith(ON)}
+        below = {k[len(ON):]: v for k, v in values.items() if k.startswith(ON)}
+        return own, below
 
     @property
     def n_params(self) -> int:
@@ -132,8 +154,15 @@ class Candidate:
         unit = np.atleast_2d(unit)
         return {s.name: s.to_physical(unit[:, k]) for k, s in enumerate(self.specs)}
 
-    def anchor_unit(self) -> np.ndarray:
-        return np.array([s.to_unit(self.anchor[s.name]) for s in self.specs], np.float64)
+    def anchor_unit(self, below: dict | None = None) -> np.ndarray:
+        """Unit-cube anchor; with ``below`` (the ``on`` candidate's fitted values), the point of this family
+        closest to that fitted model (the internal-resistance family absorbs ``recalibrate_base``'s factor on
+        b*_int, since it replaces the base law)."""
+        anchor = dict(self.anchor)
+        if below and self.name == "internal_resistance" and "internal_resistance_factor" in below:
+            k = float(below["internal_resistance_factor"])
+            anchor = {n: v * k for n, v in anchor.items()}
+        return np.array([s.to_unit(anchor[s.name]) for s in self.specs], np.float64)
 
     def apply(self, base, values: dict, ref: dict):
         """Params for a batch: ``base`` has (B,) leaves; ``values`` {name: (B,)}; ``ref`` per-vehicle references.
@@ -142,6 +171,9 @@ class Candidate:
         """
         dtype = base.dtype
         f = lambda x: jnp.asarray(x, dtype)  # noqa: E731
+        if self.on is not None:
+            values, below = self.split_values(values)
+            base = self.on.apply(base, below, ref)
         if self.name == NONE:
             return base
         if self.name == RECALIBRATE:
@@ -206,8 +238,13 @@ def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
                   {"height_factor": 0.0, "time_constant": 0.05},
                   "longitudinal load transfer during acceleration and braking"),
         Candidate("sensor_artifacts", (ParamSpec("window", 0.0, 1.0, False, "s"),
-                                       ParamSpec("gyro_bias", -0.1, 0.1, False, "rad/s")),
-                  {"window": 0.0, "gyro_bias": 0.0}, "encoder averaging window and gyro bias"),
+                                       ParamSpec("gyro_bias", -0.2, 0.2, False, "rad/s"),
+                                       ParamSpec("gyro_scale", -0.3, 0.3, False, "-"),
+                                       ParamSpec("current_offset_left", -1.5, 1.5, False, "A"),
+                                       ParamSpec("current_offset_right", -1.5, 1.5, False, "A")),
+                  {"window": 0.0, "gyro_bias": 0.0, "gyro_scale": 0.0, "current_offset_left": 0.0,
+                   "current_offset_right": 0.0},
+                  "encoder averaging window, gyro bias and scale factor, ammeter zero offsets"),
         Candidate(RECALIBRATE, (ParamSpec("internal_resistance_factor", 0.7, 1.4, True, "-"),
                                 ParamSpec("cohesion_factor", 0.5, 2.0, True, "-"),
                                 ParamSpec("friction_angle_factor", 0.9, 1.1, True, "-"),

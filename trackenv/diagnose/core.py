@@ -4,7 +4,9 @@ and how far the gap closes once that effect is added (docs/model.md §8).
 1. **Where** — every test is replayed on the base model; the gap is measured per test × signal ×
    phase (:mod:`.phases`, :mod:`.metrics`) and the cells that carry it are named.
 2. **Which** — each candidate (:mod:`.candidates`: the effects, the ``recalibrate_base`` control,
-   ``none``) is fitted on calibration data and scored on held-out data (:mod:`.fit`: a test whose
+   ``none``) is fitted on calibration data and scored on held-out data; every effect is fitted on top of
+   the control's fit of the same fold (or on the base, if that fits the fold's calibration data better),
+   so that "beats the control" compares nested models (:mod:`.fit`: a test whose
    maneuver repeats is held out whole, a unique one is forward-chained: fitted on its first half, scored
    on the rest). Fits: derivative-free search, then Levenberg-Marquardt through the simulator (:mod:`.polish`).
 3. **Verdict** — :func:`decide`, from the cached per-sample evidence (:func:`evidence`); see ``RULE_TEXT``.
@@ -57,17 +59,26 @@ SENSOR = "sensor_artifacts"
 N_BOOT = 300
 
 RULE_TEXT = (
-    "An effect is named only if all of these hold, each at alpha = 0.05 (an intersection-union rule: naming an "
+    "Every effect is fitted on top of the `recalibrate_base` control: fold by fold, on the base parameters the "
+    "control fitted on that fold's calibration data, or on the base model itself where that fits the fold's "
+    "calibration data better; an effect's family thus contains the fitted control and (3) compares nested "
+    "models. The physical effects are tried in the order of their held-out scores; the first for which all "
+    "of these hold is named, each at alpha = 0.05 (an intersection-union rule: naming an "
     "effect when none beats the base model, or when tuning the base parameters does as well, has probability "
-    "<= alpha): (1) the base model's gap is real: the AR(1)-noise chi-square test of its residuals, "
-    "Bonferroni-combined over test x signal, has p < alpha; (2) the effect with the lowest held-out score "
+    "<= alpha; the max-T corrections make trying every effect no more likely to name one under the null): "
+    "(1) the base model's gap is real: the AR(1)-noise chi-square test of its residuals, "
+    "Bonferroni-combined over test x signal, has p < alpha; (2) the effect "
     "beats `none` on the held-out samples: a fixed-design paired test whose variance is the instruments' "
     "AR(1) noise projected on the two predictions' difference, max-T corrected over all effect candidates "
     "(p < alpha); (3) it beats the `recalibrate_base` control the same way (max-T over the effects, p < alpha) and also by "
     "a Diebold-Mariano test (Newey-West variance, bandwidth >= 2 correlation times of the loss differential, "
     "p < alpha), else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
-    "itself passes (2)-(3); (5) its held-out gap shrink is at least 10%. Otherwise `none`, with the reason. "
+    "itself passes (2)-(3); (5) it closes at least 10% of the held-out gap that the better of `none` and "
+    "`recalibrate_base` leaves (its own part: the shrink reported beside it counts from the base model and includes "
+    "what the control closes). If no physical effect passes, `sensor_artifacts` is named if it passes "
+    "(2), (3) and (5). Otherwise `none`, with the reason of the "
+    "best-scoring effect. "
     "Confidence: 1 - (largest corrected p-value the named effect had to pass); for `none`, the smallest such "
     "value of any effect; times 0.7 for a single test, 0.5 when a control was not fitted, 0.8 when the fit did "
     "not converge.")
@@ -259,28 +270,51 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
         return {**out, "effect": NONE, "confidence": min(1.0, ev["gap_p"]),
                 "reason": f"the base model's gap is within the noise (AR(1) chi-square test, p = {ev['gap_p']:.2g})",
                 "p_used": ev["gap_p"]}
-    e = min(physical, key=score.get) if physical else SENSOR
-    ok, p_used, why = passes(e)
-    if SENSOR in cand and e != SENSOR:
-        ps = p_of(e, SENSOR, physical)
-        if ps >= alpha:
-            ok_s, p_s, why_s = passes(SENSOR)
-            if ok_s:
-                e, ok, p_used, why = SENSOR, True, p_s, ""
-            elif ok:
-                ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; p = {ps:.2g}"
-                                              f" ≥ {alpha:.2g})")
-        else:
-            p_used = max(p_used, ps)
-    if not ok and SENSOR in cand and e != SENSOR:
+    # (5) is about the effect's own part: where the control was fitted, an effect stands on it (and so shares
+    # what tuning closes), and its shrink counts from the gap the better of `none` and the control leaves
+    gap_ref = cand[NONE]["heldout_gap"]
+    left_by = "left by the base model"
+    if RECALIBRATE in cand and cand[RECALIBRATE]["heldout_gap"] < gap_ref:
+        gap_ref, left_by = cand[RECALIBRATE]["heldout_gap"], "that recalibrating the base leaves"
+
+    def own_shrink(e):
+        return (1.0 - cand[e]["heldout_gap"] / gap_ref) if gap_ref > 0 else 0.0
+
+    out["gap_reference"] = left_by
+
+    def judge(e):
+        """(named effect, ok, p_used, why) for physical effect ``e`` (or the instruments alone)."""
+        ok, p_used, why = passes(e)
+        if SENSOR in cand and e != SENSOR:
+            ps = p_of(e, SENSOR, physical)
+            if ps >= alpha:
+                ok_s, p_s, _ = passes(SENSOR)
+                if ok_s:
+                    e, ok, p_used, why = SENSOR, True, p_s, ""
+                elif ok:
+                    ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; "
+                                                  f"p = {ps:.2g} ≥ {alpha:.2g})")
+            else:
+                p_used = max(p_used, ps)
+        if ok and own_shrink(e) < min_shrink:
+            ok, why = False, (f"{e} closes only {100 * own_shrink(e):.0f}% of the held-out gap {left_by} "
+                              f"(< {100 * min_shrink:.0f}%)")
+        return e, ok, p_used, why
+
+    # the physical effects in the order of their held-out scores: the first that passes is named (the tests
+    # are max-T corrected over the family, so trying each does not inflate the false-positive rate)
+    why = ""
+    for e in sorted(physical, key=score.get) or [SENSOR]:
+        e, ok, p_used, why_e = judge(e)
+        why = why or why_e
+        if ok:
+            return {**out, "effect": e, "reason": "passes the tests of the rule", "confidence": max(0.0, 1.0 - p_used),
+                    "p_used": p_used, "own_shrink": own_shrink(e)}
+    if SENSOR in cand and physical:
         ok_s, p_s, _ = passes(SENSOR)
-        if ok_s and score[SENSOR] < score[NONE]:
-            e, ok, p_used, why = SENSOR, True, p_s, ""
-    if ok and cand[e]["heldout_shrink"] < min_shrink:
-        ok, why = False, f"{e} closes only {100 * cand[e]['heldout_shrink']:.0f}% of the held-out gap (< {100 * min_shrink:.0f}%)"
-    if ok:
-        return {**out, "effect": e, "reason": "passes the tests of the rule", "confidence": max(0.0, 1.0 - p_used),
-                "p_used": p_used}
+        if ok_s and score[SENSOR] < score[NONE] and own_shrink(SENSOR) >= min_shrink:
+            return {**out, "effect": SENSOR, "reason": "passes the tests of the rule",
+                    "confidence": max(0.0, 1.0 - p_s), "p_used": p_s, "own_shrink": own_shrink(SENSOR)}
     # none: confidence = how far the strongest effect was from passing
     p_min = min((max(p_of(x, NONE, effects), p_of(x, RECALIBRATE, effects) or 0.0) for x in effects), default=1.0)
     return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, p_min), "p_used": p_min}
@@ -327,12 +361,15 @@ def shrink_interval(data, sq_before, sq_after, point, seed=0, n_boot=N_BOOT) -> 
     return centred_interval(point, np.array(vals))
 
 
-def verdict_line(effect, confidence, shrink, ci, ins, ins_ci, reason, flags) -> str:
+def verdict_line(effect, confidence, shrink, ci, ins, ins_ci, reason, flags, own=None, left_by="") -> str:
     fl = f" [{'; '.join(flags)}]" if flags else ""
     if effect == NONE:
         return f"none (confidence {confidence:.2f}): {reason}{fl}"
+    own_txt = (f"; by itself {100 * own:.0f}% of the held-out gap {left_by}" if own is not None and
+               left_by.startswith("that recal") else "")
     return (f"{effect} (confidence {confidence:.2f}): held-out gap shrink {100 * shrink:.0f}% (95% CI {100 * ci[0]:.0f}"
-            f"-{100 * ci[1]:.0f}%), in-sample {100 * ins:.0f}% (95% CI {100 * ins_ci[0]:.0f}-{100 * ins_ci[1]:.0f}%){fl}")
+            f"-{100 * ci[1]:.0f}%), in-sample {100 * ins:.0f}% (95% CI {100 * ins_ci[0]:.0f}-{100 * ins_ci[1]:.0f}%)"
+            f"{own_txt}{fl}")
 
 
 def save_evidence(ev: dict, path: Path) -> None:
@@ -446,14 +483,21 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             planned += len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters)
     bar = tqdm(total=planned, desc="diagnose", unit="sim", disable=not progress, leave=False)
     fits: dict[str, CandidateFit] = {}
-    order = [c for c in cands if c.name == NONE] + [c for c in cands if c.name != NONE]
+    # none, then the control, then every effect on top of the control's fit (fold by fold; each fold may
+    # instead keep the effect on the unrecalibrated base, whichever fits its calibration data better)
+    order = sorted(cands, key=lambda c: (c.name != NONE, c.name != RECALIBRATE))
     t_fit = {}
     for c in order:
         bar.set_postfix_str(c.name)
         t0 = time.perf_counter()
+        below = None
+        if c.is_effect and RECALIBRATE in fits:
+            rc = fits[RECALIBRATE]
+            c = c.standing_on(rc.candidate)
+            below = [[dict(fd.params), dict(rc.candidate.anchor)] for fd in [*rc.folds, rc.full]]
         fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
                                      polish_iters=polish_iters, jacobian=jacobian,
-                                     progress=bar.update)
+                                     progress=bar.update, below=below)
         t_fit[c.name] = time.perf_counter() - t0
     bar.close()
 
@@ -496,7 +540,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     flags = analysis_flags(data, fits, fits_applicable=[c.name for c in cands], chosen=chosen_name,
                            restricted=bool(candidates))
     confidence = rule["confidence"] * flag_penalty(flags)
-    line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags)
+    line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags, rule.get("own_shrink"),
+                        rule.get("gap_reference", ""))
     rows = cell_table(data, base.full_pred, chosen.heldout_pred)
     cell_ci(data, rows, sq_base, sq_after, seed=seed)
     significant = rule["gap_significant"]
@@ -512,6 +557,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "heldout_gap_shrink": shrink if effect != NONE else 0.0,
             "heldout_gap_shrink_ci": list(shrink_ci) if effect != NONE else None,
             "insample_gap_shrink": ins, "insample_gap_shrink_ci": list(ins_ci),
+            "heldout_gap_shrink_own": rule.get("own_shrink"), "own_shrink_reference": rule.get("gap_reference"),
             "best_candidate": best, "reason": reason, "gap_significant": significant,
             "gap_test": {"p": rule["gap_p"], "z_max": ev["gap_z_max"], "cells": ev["gap_cells_tested"]},
             "tests_used": rule["tests"],

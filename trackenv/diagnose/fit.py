@@ -32,6 +32,11 @@ or ``sensor_artifacts``, which has its own window) also carries an *encoder laye
 is scored with the speed averaged over each of ``ENCODER_WINDOWS`` (free: no new simulation), and the
 window is selected with the point.
 
+An effect that stands on the control (:attr:`.candidates.Candidate.on`) has a different base model per
+fold: the control's factors fitted on that fold, or the base itself. Each fold × base (*branch*) then
+gets its own Latin-hypercube points, the first of them the branch's anchor; a fold's cross-entropy round
+stays in the branch of its best point, and the polish refines that branch.
+
 Stage 2, gradient polish (:mod:`.polish`): each fold's best point is refined by Levenberg-Marquardt
 on the fold's weighted residuals, with the Jacobian from ``jax.jacfwd`` through the batched simulator
 (all folds in one call per iteration) and the bounds kept by a logistic map of the unit cube. Each fold
@@ -49,7 +54,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from .batch import BatchSimulator
-from .candidates import Candidate
+from .candidates import ON, Candidate
 from .data import TestData
 from .metrics import MODEL_FLOOR, signal_error, signal_weight  # noqa: F401  (MODEL_FLOOR: the loss's floor)
 
@@ -204,8 +209,9 @@ class _Pool:
             self.owner.append(owner[s])
             self.window.append(self.windows[c % nw])
 
-    def select(self, fold: int, weights: np.ndarray):
-        idx = [i for i, o in enumerate(self.owner) if o in (-1, fold)]
+    def select(self, fold: int, weights: np.ndarray, n_folds: int):
+        """The points fold ``fold`` may use (global ones, and its own in every branch), best first."""
+        idx = [i for i, o in enumerate(self.owner) if o == -1 or o % n_folds == fold]
         with np.errstate(invalid="ignore"):
             score = np.array([np.sum(np.where(weights > 0, self.loss[i] * weights, 0.0)) for i in idx])
         score = np.where(np.isfinite(score), score, np.inf)
@@ -219,11 +225,41 @@ def _losses(tests, pred):
 
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
                   min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None,
-                  jacobian: str = "secant") -> CandidateFit:
+                  jacobian: str = "secant", below: list | None = None) -> CandidateFit:
+    """Fit ``cand`` on every fold and on all the data (see the module docstring).
+
+    ``below``: where ``cand`` stands on another candidate (:attr:`.candidates.Candidate.on`), per fit (the
+    ``folds``, then the full fit) a list of the parameter sets of that candidate it may stand on: e.g. its
+    fitted values on that fold, then its anchor (the base model). The last set must be the same for every
+    fit: its points are shared by all folds, as without ``below``. Each fold searches every *branch* (one
+    per set, each holding its own anchor) and keeps the branch of its best calibration loss; a fold's
+    held-out prediction therefore uses nothing fitted on its held-out data.
+    """
     tests = sim.tests
     n = len(tests)
     fold_defs = list(folds) + [full_fold(tests)]  # last = full fit
     F = len(fold_defs)
+    if (cand.on is None) != (below is None) or (below is not None and (len(below) != F or
+                                                                        len({len(b) for b in below}) != 1)):
+        raise ValueError(f"{cand.name}: 'below' must give, for each of the {F} fits (folds, then the full fit), "
+                         f"equally many parameter sets of {cand.on and cand.on.name}")
+    below_keys = [s.name for s in cand.on.specs] if cand.on is not None else []
+    n_branch = len(below[0]) if below is not None else 1
+
+    if below is not None and any(b[-1] != below[0][-1] for b in below):
+        raise ValueError(f"{cand.name}: the last parameter set of 'below' must be the same for every fit")
+
+    def below_of(o):
+        """The parameter set that owner ``o`` (fold ``o mod F``, branch ``o // F``; -1: shared, the last) stands on."""
+        return below[0][-1] if o < 0 else below[o % F][o // F]
+
+    def values(pts, owner):
+        """Physical values of unit points ``pts`` (S, p), each with the values its owner stands on."""
+        vals = cand.physical(pts) if p else {}
+        for k in below_keys:
+            vals[ON + k] = np.array([below_of(o)[k] for o in owner], np.float64)
+        return vals
+
     windows = ENCODER_WINDOWS if cand.encoder_layer else ()
     pool = _Pool(windows)
     n_sims = 0
@@ -231,6 +267,8 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     p = cand.n_params
     last_gain = np.zeros(F)
     if p == 0:
+        if below is not None:
+            raise ValueError(f"{cand.name}: a candidate without parameters cannot stand on another one")
         pred, div = sim.run(cand, {}, progress)
         pool.add(np.zeros((1, 0)), _losses(tests, pred), pred, [-1])
         n_sims += n
@@ -239,44 +277,59 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     else:
         m = max(per_fold, math.ceil(min_round / F))
         S = F * m
+        # one global design, every point scored for every fold (on the shared base)
         sob = qmc.LatinHypercube(d=p, seed=seed).random(S)
-        sob[0] = cand.anchor_unit()
-        pred, div = sim.run(cand, cand.physical(sob), progress, windows)
+        owner0 = [-1] * S
+        sob[0] = cand.anchor_unit(below_of(-1) if below is not None else None)
+        if below is not None:  # and each fold × other branch its own: m points each, the first its anchor
+            FB = F * (n_branch - 1)
+            extra = qmc.LatinHypercube(d=p, seed=seed + 7).random(FB * m)
+            owner0 += [i % FB for i in range(FB * m)]
+            for o in range(FB):
+                extra[o] = cand.anchor_unit(below_of(o))
+            sob = np.concatenate([sob, extra])
+        pred, div = sim.run(cand, values(sob, owner0), progress, windows)
         loss = _losses(tests, pred)
         loss[np.broadcast_to(div[:, None, :], loss.shape)] = np.inf
-        pool.add(sob, loss, pred, [-1] * S)
-        n_sims += n * S
+        pool.add(sob, loss, pred, owner0)
+        n_sims += n * len(owner0)
         n_div += int(div.sum())
         rng = np.random.default_rng(seed + 1)
         for r in range(rounds):
             pts, owner, before = [], [], []
             for f, fd in enumerate(fold_defs):
-                order, score = pool.select(f, fd.weights)
+                order, score = pool.select(f, fd.weights, F)
                 before.append(score[0])
                 elite = np.stack([pool.unit[i] for i in order[:4]])
                 centre = elite[0]
                 spread = np.maximum(elite.std(axis=0), 0.04) * (0.6**r)
                 new = np.clip(centre + spread * rng.standard_normal((m, p)), 0.0, 1.0)
                 pts.append(new)
-                owner += [f] * m
+                o = pool.owner[order[0]]  # new points in the branch of the best one
+                if below is None:
+                    o = f
+                elif o < 0:  # the shared branch, owned by this fold
+                    o = f + F * (n_branch - 1)
+                owner += [o] * m
             pts = np.concatenate(pts)
-            pred, div = sim.run(cand, cand.physical(pts), progress, windows)
+            pred, div = sim.run(cand, values(pts, owner), progress, windows)
             loss = _losses(tests, pred)
             loss[np.broadcast_to(div[:, None, :], loss.shape)] = np.inf
             pool.add(pts, loss, pred, owner)
             n_sims += n * pts.shape[0]
             n_div += int(div.sum())
             for f, fd in enumerate(fold_defs):
-                _, score = pool.select(f, fd.weights)
+                _, score = pool.select(f, fd.weights, F)
                 last_gain[f] = (before[f] - score[0]) / max(before[f], 1e-12) if np.isfinite(before[f]) else 1.0
     # the search's best point per fold
     best_i = []
     search_score = []
     for f, fd in enumerate(fold_defs):
-        order, score = pool.select(f, fd.weights)
+        order, score = pool.select(f, fd.weights, F)
         best_i.append(order[0])
         search_score.append(float(score[0]))
     units = [np.asarray(pool.unit[i], np.float64) for i in best_i]
+    chosen = [below_of(pool.owner[i]) for i in best_i] if below is not None else None
     wins = [pool.window[i] for i in best_i]
     preds = [pool.pred[i] for i in best_i]
     scores = list(search_score)
@@ -286,7 +339,7 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
         from .polish import polish_folds
 
         res = polish_folds(sim, cand, fold_defs, units, wins, scores, iters=polish_iters, progress=progress,
-                           jacobian=jacobian)
+                           jacobian=jacobian, below=chosen)
         n_sims += res["n_simulations"]
         for f in range(F):
             polish_info[f] = res["info"][f]
@@ -309,6 +362,8 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
         params = {k: float(v[0]) for k, v in cand.physical(unit[None]).items()} if p else {}
         if wins[f] is not None:
             params["encoder_window"] = float(wins[f])
+        if below is not None:
+            params.update({f"{cand.on.name}.{k}": float(chosen[f][k]) for k in below_keys})
         lp = np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
                        for j in range(n)])  # (n, 2)
         held = () if fd.kind == "full" else (fd.held,)

@@ -35,7 +35,7 @@ import numpy as np
 from ..compare import POSE, stack_trees, wrap_angle
 from ..simulate import simulate_batch
 from .batch import predictions_at_log
-from .candidates import Candidate
+from .candidates import ON, Candidate
 from .metrics import signal_weight
 
 U_EPS = 1e-3
@@ -66,8 +66,9 @@ def _encoder_average_jnp(t, x, window):
 class _Problem:
     """The residual function of every fold of one candidate, as one jitted value-and-Jacobian call."""
 
-    def __init__(self, sim, cand: Candidate, fold_defs, windows):
+    def __init__(self, sim, cand: Candidate, fold_defs, windows, below=None):
         self.sim, self.cand, self.F = sim, cand, len(fold_defs)
+        self.below = below  # per fold: the fitted values of the candidate ``cand`` stands on (or None)
         tests = sim.tests
         self.sigs = []  # per test: signals compared
         self.meas, self.coef, self.ok = [], [], []
@@ -99,18 +100,24 @@ class _Problem:
         windows = self.windows[np.arange(F) % self.F]
         u = jax.nn.sigmoid(z)
         vals = {s.name: _to_physical_jnp(s, u[:, k]) for k, s in enumerate(cand.specs)}
+        fold_of = np.arange(F) % self.F
+        fixed = {} if self.below is None else {ON + k: np.array([self.below[f][k] for f in fold_of])
+                                               for k in self.below[0]}
         out = {}
         for bi, b in enumerate(sim.buckets):
             nb = len(b.tests)
             base = stack_trees([sim.base[j] for j in b.tests])
             base = jax.tree.map(lambda x: jnp.repeat(x, F, axis=-1) if eqx.is_inexact_array(x) else x, base)
-            v = {k: jnp.tile(x, nb) for k, x in vals.items()}
+            v = {k: jnp.tile(x, nb) for k, x in vals.items()} | {k: np.tile(x, nb) for k, x in fixed.items()}
             ref = {"b_int_constant": np.repeat(sim.b_int_constant[list(b.tests)], F)}
             params = cand.apply(base, v, ref)
             t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
             if cand.instrument_only:
-                ch0 = sim.base_channels(bi, b)
-                ch = {k: jnp.repeat(jnp.asarray(x, params.dtype), F, axis=-1) for k, x in ch0.items()}
+                if cand.on is not None:
+                    ch0 = sim.channels_on(bi, b, cand.on, {k[len(ON):]: x for k, x in fixed.items()})
+                else:
+                    ch0 = {k: np.repeat(x, F, axis=-1) for k, x in sim.base_channels(bi, b).items()}
+                ch = {k: jnp.asarray(x, params.dtype) for k, x in ch0.items()}
                 for eff in params.effects:
                     ch = eff.instruments(ch, t, params)
             else:
@@ -165,13 +172,14 @@ class _Problem:
 
 
 def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, iters: int = 4,
-                 progress=None, jacobian: str = "secant") -> dict:
-    """Levenberg-Marquardt from each fold's search point; see the module docstring."""
+                 progress=None, jacobian: str = "secant", below: list | None = None) -> dict:
+    """Levenberg-Marquardt from each fold's search point; see the module docstring. ``below``: per fold, the
+    fitted values of the candidate that ``cand`` stands on (:attr:`.candidates.Candidate.on`)."""
     from .fit import test_loss_parts
 
     F, p = len(fold_defs), cand.n_params
     tests = sim.tests
-    prob = _Problem(sim, cand, fold_defs, windows)
+    prob = _Problem(sim, cand, fold_defs, windows, below)
     u0 = np.clip(np.stack(units), U_EPS, 1 - U_EPS)
     z = np.log(u0) - np.log1p(-u0)
     if jacobian not in JACOBIANS:

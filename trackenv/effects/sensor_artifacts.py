@@ -7,12 +7,14 @@ Instrument hook only (the dynamics are untouched):
   ``speed_ideal_m(t) = (1/W) ∫_{t-W}^{t} speed_ideal(τ) dτ``, with the samples interpreted as piecewise
   linear (integrated exactly) and the signal held at its first value before the log starts;
   W = 0 leaves it unchanged;
-- **ammeter ripple and rectification** (§5.3: the ammeter reports |i|):
-  ``i_m = |i + A sin(2π f t)|`` (A [A], f [Hz]) when ``rectify`` (static) is True, else ``i + A sin(2π f t)``;
-- **gyro bias**: ``yaw_rate_m = yaw_rate + β`` [rad/s].
+- **ammeter offset, ripple and rectification** (§5.3: the ammeter reports |i|; a Hall-effect sensor's
+  zero offset c [A] differs per channel): ``i_m = |i + c + A sin(2π f t)|`` (A [A], f [Hz]) when
+  ``rectify`` (static) is True, else ``i + c + A sin(2π f t)``;
+- **gyro bias and scale factor** (IEEE Std 952-1997): ``yaw_rate_m = (1 + ε) yaw_rate + β`` [rad/s].
 
 Defaults: W = 0.1 s (a typical encoder-velocity window at the logs' 10-20 Hz rate; the thesis does
-not give it), no ripple (A = 0, f = 50 Hz), β = 0, rectify = True (the field ammeter).
+not give it), no offsets (c = 0), no ripple (A = 0, f = 50 Hz), β = 0, ε = 0, rectify = True (the field
+ammeter).
 Channels are (T, *b) with times t (T,).
 """
 
@@ -66,7 +68,7 @@ def moving_average(t, s, window):
 
 
 class SensorArtifacts(Effect):
-    """Encoder averaging window, ammeter ripple + rectification, gyro bias (instrument transforms)."""
+    """Encoder averaging window, ammeter offsets, ripple + rectification, gyro bias and scale (instrument transforms)."""
 
     id: ClassVar[str] = "sensor_artifacts"
     bounds: ClassVar[dict] = {
@@ -74,30 +76,37 @@ class SensorArtifacts(Effect):
         "ripple_amplitude": (0.0, 5.0),
         "ripple_frequency": (0.0, 1000.0),
         "gyro_bias": (-0.5, 0.5),
+        "gyro_scale": (-0.5, 0.5),
+        "current_offset_left": (-5.0, 5.0),
+        "current_offset_right": (-5.0, 5.0),
     }
 
     window: jax.Array  # s, encoder averaging window
     ripple_amplitude: jax.Array  # A
     ripple_frequency: jax.Array  # Hz
     gyro_bias: jax.Array  # rad/s
+    gyro_scale: jax.Array  # -, scale-factor error ε
+    current_offset_left: jax.Array  # A, zero offset of the left ammeter
+    current_offset_right: jax.Array  # A
     rectify: bool = eqx.field(static=True, default=True)
 
     @classmethod
     def default(cls, dtype=jnp.float32):
         f = lambda v: jnp.asarray(v, dtype)  # noqa: E731
-        return cls(window=f(0.1), ripple_amplitude=f(0.0), ripple_frequency=f(50.0), gyro_bias=f(0.0))
+        return cls(window=f(0.1), ripple_amplitude=f(0.0), ripple_frequency=f(50.0), gyro_bias=f(0.0),
+                   gyro_scale=f(0.0), current_offset_left=f(0.0), current_offset_right=f(0.0))
 
     def instruments(self, channels, t, params):
         out = dict(channels)
         t = jnp.asarray(t)
         if "speed_ideal" in out:
             out["speed_ideal"] = moving_average(t, out["speed_ideal"], self.window)
-        for key in ("i_left", "i_right"):
+        for key, offset in (("i_left", self.current_offset_left), ("i_right", self.current_offset_right)):
             if key in out:
                 i = out[key]
                 tt = t.reshape(t.shape + (1,) * (i.ndim - 1))
-                i = i + self.ripple_amplitude * jnp.sin(2.0 * jnp.pi * self.ripple_frequency * tt)
+                i = i + offset + self.ripple_amplitude * jnp.sin(2.0 * jnp.pi * self.ripple_frequency * tt)
                 out[key] = jnp.abs(i) if self.rectify else i
         if "yaw_rate" in out:
-            out["yaw_rate"] = out["yaw_rate"] + self.gyro_bias
+            out["yaw_rate"] = (1.0 + self.gyro_scale) * out["yaw_rate"] + self.gyro_bias
         return out
