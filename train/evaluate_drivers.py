@@ -1,6 +1,8 @@
 """Evaluate the shipped drivers (train/drivers/*.zip) against the baselines, nominal and perturbed.
 
-    python train/evaluate_drivers.py            # writes train/results.json and train/results.md
+    python train/evaluate_drivers.py                    # all sections; writes train/results.json and .md
+    python train/evaluate_drivers.py --effects-only     # only the "effects" section (the rest kept)
+    python train/evaluate_drivers.py JTurn-v0-asphalt   # only the named driver(s)
 
 For every driver <EnvName>-<terrain>.zip (trained on the nominal terrain):
 
@@ -10,11 +12,18 @@ For every driver <EnvName>-<terrain>.zip (trained on the nominal terrain):
   episode each; the open-loop profile and the classical gains stay those of the driver's terrain);
 - Table 5.6 ranges: 16 episodes with the terrain parameters sampled per episode from the default
   domain-randomisation ranges of the driver's terrain (trackenv/envs/randomization.py: sand c 0-3.04 kPa,
-  phi 23-38 deg, K 1-5.08 cm, b*_int 0.73-1.17 N m, mass +-10 %; asphalt relative spans), seeds 2000+.
+  phi 23-38 deg, K 1-5.08 cm, b*_int 0.73-1.17 N m, mass +-10 %; asphalt relative spans), seeds 2000+;
+- effects: the same three methods on the driver's terrain with one unmodelled effect of docs/model.md §8
+  switched on at its library default parameters (``env_kwargs={"effects": [id]}``), each effect that acts
+  on that ground (slip_sinkage on deformable ground only, grouser_stiction on hard ground only), plus a
+  reference run without effects made the same way. One episode each: without domain randomisation the
+  environment and the effects are deterministic (every seed gives the same episode). SIMULATION only:
+  synthetic effects at library defaults, not measured data.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -29,11 +38,19 @@ torch.set_num_threads(1)
 
 from trackenv.drivers import ENV_NAME, evaluate, format_table, load_policy  # noqa: E402
 from trackenv.drivers.episodes import jsonable  # noqa: E402
+from trackenv.effects import EFFECT_IDS  # noqa: E402
+from trackenv.params import load_params  # noqa: E402
 
 SOILS = ("dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")
+# effects that act on one kind of ground only (multiplied by terrain.deformable or 1 - deformable)
+EFFECT_GROUND = {"slip_sinkage": "deformable", "grouser_stiction": "hard"}
+EFFECT_EPISODES = 1  # deterministic environment and effects: one episode is every episode
+EFFECT_SEED = 1000
+CLOSE = 0.05  # |learned RMSE / PI RMSE - 1| below this: a close call (the learned driver's RMSE moves by a few %
+#              with float-level changes, e.g. the batch size of the evaluation)
 
 
-def main(only=None):
+def main(only=None, effects_only=False):
     drivers = ROOT / "train" / "drivers"
     results = {}
     out_json = ROOT / "train" / "results.json"
@@ -48,21 +65,252 @@ def main(only=None):
             if not zp.is_file():
                 print(f"missing {zp}", flush=True)
                 continue
+            if effects_only and name not in results:
+                print(f"{name}: no record in {out_json.name}; run without --effects-only first", flush=True)
+                continue
             t0 = time.time()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 model = load_policy(zp, task, terrain, warn=False)
-            rec = {"train": json.loads((drivers / f"{name}.json").read_text())}
-            rec["nominal"] = evaluate(task, terrain, model, episodes=4, seed=1000,
-                                      figures=ROOT / "train" / "figures")
-            rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
-            rec["table_5_6"] = evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
+            if effects_only:
+                rec = dict(results[name])
+            else:
+                rec = {"train": json.loads((drivers / f"{name}.json").read_text())}
+                rec["nominal"] = evaluate(task, terrain, model, episodes=4, seed=1000,
+                                          figures=ROOT / "train" / "figures")
+                rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
+                rec["table_5_6"] = evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
+            rec["effects"] = evaluate_effects(task, terrain, model)
             results[name] = jsonable(rec)
             out_json.write_text(json.dumps(results, indent=1) + "\n")
             print(f"{name}: {time.time() - t0:.0f} s", flush=True)
-            print(format_table(rec["nominal"]), flush=True)
+            if not effects_only:
+                print(format_table(rec["nominal"]), flush=True)
+            print(format_effects(name, results[name]["effects"]), flush=True)
     write_md(results)
-    write_driver_summary(results)
+    if not effects_only:  # its nominal metrics are unchanged by the effects section
+        write_driver_summary(results)
+
+
+# ----------------------------------------------------------------------------------------------
+# the "effects" section: one unmodelled effect (docs/model.md §8) at a time, library defaults
+
+
+def effect_skip_reason(effect_id, terrain):
+    """Why ``effect_id`` is not evaluated on ``terrain`` (it acts only on the other kind of ground), or None."""
+    ground = EFFECT_GROUND.get(effect_id)
+    if ground is None:
+        return None
+    deformable = bool(float(load_params(terrain).terrain.deformable))
+    if (ground == "deformable") != deformable:
+        return f"acts on {ground} ground only; {terrain} is {'deformable' if deformable else 'hard'}"
+    return None
+
+
+def evaluate_effects(task, terrain, model):
+    """Learned vs open loop vs classical on ``terrain`` with each applicable effect at its defaults.
+
+    Returns ``{"episodes", "seed", "seconds", "reference": <evaluate result without effects>,
+    "cases": {id: <evaluate result> + "changed" + "comparison" | {"skipped": reason}}}``.
+    """
+    t0 = time.time()
+    kw = dict(episodes=EFFECT_EPISODES, seed=EFFECT_SEED)
+    ref = evaluate(task, terrain, model, **kw)
+    cases = {}
+    for eid in EFFECT_IDS:
+        why = effect_skip_reason(eid, terrain)
+        if why:
+            cases[eid] = {"skipped": why}
+            continue
+        res = evaluate(task, terrain, model, env_kwargs={"effects": [eid]}, **kw)
+        res["effects"] = [eid]
+        res["changed"] = _changed(ref, res)
+        res["comparison"] = compare_methods(res)
+        cases[eid] = res
+    ref["comparison"] = compare_methods(ref)
+    return {"episodes": EFFECT_EPISODES, "seed": EFFECT_SEED, "parameters": "library defaults (trackenv.effects)",
+            "simulation_only": True, "seconds": time.time() - t0, "reference": ref, "cases": cases}
+
+
+def _changed(ref, res):
+    """Whether any metric of any method differs from the reference run (did the effect act at all?)."""
+    keys = ("success", "tracking_rmse", "energy", "peak_current", "episode_return", "time")
+    for m, r in res["methods"].items():
+        for a, b in zip(ref["methods"][m]["episodes"], r["episodes"]):
+            if any(a[k] != b[k] for k in keys):
+                return True
+    return False
+
+
+def compare_methods(res):
+    """Learned vs each baseline. Beats = a higher success rate, or the same success rate and a lower tracking
+    RMSE (a failed episode's RMSE, cut at its end, is not comparable with a completed one's); a reason otherwise."""
+    sm = {m: r["summary"] for m, r in res["methods"].items()}
+    out = {}
+    if "learned" not in sm:
+        return out
+    L = sm["learned"]
+    for m in ("classical", "open_loop"):
+        if m not in sm:
+            continue
+        B = sm[m]
+        lower = bool(L["tracking_rmse"] < B["tracking_rmse"])
+        more, same = L["success_rate"] > B["success_rate"], L["success_rate"] == B["success_rate"]
+        beats = bool(more or (same and lower))
+        rel = L["tracking_rmse"] / B["tracking_rmse"] - 1.0 if B["tracking_rmse"] else float("nan")
+        c = {"beats": beats, "lower_rmse": lower, "rmse_change": rel}
+        if not beats:
+            c["reason"] = _reason(res, m)
+        out[m] = c
+    out["beats_both"] = all(out[m]["beats"] for m in ("classical", "open_loop") if m in out)
+    return out
+
+
+_LABEL = {"classical": "PI", "open_loop": "open loop", "learned": "learned"}
+
+
+def _failure(res, m, detail=True):
+    """Why method ``m``'s episodes failed, from their flags and progress ('off course, progress 62%, t = 1.20 s')."""
+    whys = []
+    for e in res["methods"][m]["episodes"]:
+        if e["success"]:
+            continue
+        flag = ("diverged" if e.get("diverged") else "off course" if e.get("off_course")
+                else "timed out" if e.get("timeout") else "not done")
+        whys.append(f"{flag}, progress {e['completion']:.0%}, t = {e['time']:.2f} s" if detail else flag)
+    return "; ".join(sorted(set(whys)))
+
+
+def _reason(res, m):
+    """Why the learned driver does not beat method ``m`` (success flags first, then the RMSE)."""
+    lab = _LABEL[m]
+    sm = {k: r["summary"] for k, r in res["methods"].items()}
+    if sm["learned"]["success_rate"] < sm[m]["success_rate"]:
+        return f"learned fails ({_failure(res, 'learned')}), {lab} succeeds"
+    rel = sm["learned"]["tracking_rmse"] / sm[m]["tracking_rmse"] - 1.0
+    both = ("both succeed" if sm["learned"]["success_rate"] >= 1.0
+            else f"both fail (learned: {_failure(res, 'learned')}; {lab}: {_failure(res, m, detail=False)})")
+    return f"{both}; {lab} tracks better (learned RMSE {rel:+.0%})"
+
+
+def effect_counts(results):
+    """(N, learned beats PI, learned beats both) over the evaluated driver x effect cases, the same over
+    those where the effect changed the run (``changed``), and the cases with a lower RMSE than the PI."""
+    n = pi = both = n_ch = pi_ch = both_ch = pi_rmse = 0
+    for rec in results.values():
+        for res in rec.get("effects", {}).get("cases", {}).values():
+            if "skipped" in res:
+                continue
+            c = res["comparison"]
+            n += 1
+            pi += c["classical"]["beats"]
+            both += c["beats_both"]
+            pi_rmse += c["classical"]["lower_rmse"]
+            if res["changed"]:
+                n_ch += 1
+                pi_ch += c["classical"]["beats"]
+                both_ch += c["beats_both"]
+    return (n, pi, both), (n_ch, pi_ch, both_ch), pi_rmse
+
+
+def effects_md(results):
+    """Markdown: the driver x effect table, the counts and a line per effect."""
+    recs = {k: v for k, v in results.items() if "effects" in v}
+    if not recs:
+        return []
+    any_rec = next(iter(recs.values()))["effects"]
+    lines = ["", "## Under the unmodelled effects (simulation): learned vs PI vs open loop", "",
+             "**SIMULATION ONLY.** Each driver on its own (nominal) terrain with one unmodelled effect of "
+             "[docs/model.md §8](../docs/model.md#8-unmodelled-effects-the-candidate-set) switched on at its "
+             "library default parameters (`env_kwargs={\"effects\": [id]}`); these are synthetic effects, not "
+             f"measured data. {any_rec['episodes']} episode per case (seed {any_rec['seed']}): without domain "
+             "randomisation the environment and the effects are deterministic, so every seed gives the same "
+             "episode. `slip_sinkage` acts on deformable ground only and `grouser_stiction` on hard ground only, "
+             "so they are skipped on asphalt and dry sand respectively. Row `none`: the same run without "
+             "effects (reference, not counted). *Beats* = a higher success rate, or the same success rate and a "
+             "lower tracking RMSE (a failed episode's RMSE stops at its end); Δ vs PI = learned RMSE / PI "
+             "RMSE − 1. The open-loop profile and the PI gains are those of the driver's terrain.", "",
+             "| driver | effect | RMSE learned | RMSE PI | RMSE open loop | success L / PI / OL | Δ vs PI | "
+             "learned beats PI | learned beats both | why not / note |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, rec in recs.items():
+        eff = rec["effects"]
+        unit = eff["reference"]["rmse_unit"].split()[0]
+        rows = [("none", eff["reference"])] + list(eff["cases"].items())
+        for eid, res in rows:
+            if "skipped" in res:
+                lines.append(f"| {name} | {eid} | - | - | - | - | - | - | - | skipped: {res['skipped']} |")
+                continue
+            sm = {m: r["summary"] for m, r in res["methods"].items()}
+            c = res["comparison"]
+            notes = []
+            if eid != "none" and not res["changed"]:
+                notes.append("no change vs `none` (the effect does not act in this run)")
+            for m in ("classical", "open_loop"):
+                if not c[m]["beats"]:
+                    notes.append(f"vs {_LABEL[m]}: {c[m]['reason']}")
+            for m in ("classical", "open_loop"):
+                if c[m]["beats"] and sm[m]["success_rate"] < 1.0:
+                    notes.append(f"{_LABEL[m]} fails ({_failure(res, m, detail=False)})")
+            d = c["classical"]["rmse_change"]
+            if d is not None and abs(d) < CLOSE:
+                notes.append(f"close call vs PI (Δ within ±{CLOSE:.0%})")
+            if c["classical"]["beats"] and not c["classical"]["lower_rmse"]:
+                notes.append("beats the PI on success only")
+            rmse = [f"{_f(sm[m]['tracking_rmse'], 4)} {unit}" for m in ("learned", "classical", "open_loop")]
+            succ = " / ".join(f"{sm[m]['success_rate']:.0%}" for m in ("learned", "classical", "open_loop"))
+            lines.append(f"| {name} | {eid} | {' | '.join(rmse)} | {succ} | {'-' if d is None else f'{d:+.0%}'} | "
+                         f"{_yes_no(c['classical']['beats'])} | {_yes_no(c['beats_both'])} | {'; '.join(notes)} |")
+    (n, pi, both), (n_ch, pi_ch, both_ch), pi_rmse = effect_counts(recs)
+    lines += ["", f"**Summary (simulation, library defaults):** over the {n} driver × effect cases the learned "
+              f"driver beats the PI in **{pi} of {n}** and both baselines in **{both} of {n}**; over the {n_ch} "
+              f"cases in which the effect changed the run: PI {pi_ch} of {n_ch}, both {both_ch} of {n_ch}. "
+              f"By tracking RMSE alone (ignoring success) it is below the PI's in {pi_rmse} of {n}.", "",
+              "Per effect (learned beats PI / beats both / cases):", ""]
+    for eid in EFFECT_IDS:
+        cs = [rec["effects"]["cases"][eid] for rec in recs.values() if eid in rec["effects"]["cases"]]
+        cs = [r for r in cs if "skipped" not in r]
+        if not cs:
+            continue
+        n_e = len(cs)
+        unchanged = sum(not r["changed"] for r in cs)
+        lines.append(f"- `{eid}`: {sum(r['comparison']['classical']['beats'] for r in cs)} / "
+                     f"{sum(r['comparison']['beats_both'] for r in cs)} / {n_e}"
+                     + (f" ({unchanged} of {n_e} runs identical to `none`)" if unchanged else ""))
+    diffs = []
+    for name, rec in recs.items():
+        if "nominal" not in rec:
+            continue
+        for m, r in rec["effects"]["reference"]["methods"].items():
+            a, b = rec["nominal"]["methods"][m]["summary"], r["summary"]
+            if a["success_rate"] != b["success_rate"] or abs(b["tracking_rmse"] / a["tracking_rmse"] - 1.0) > CLOSE:
+                diffs.append(f"{name} {_LABEL[m]}: {a['success_rate']:.0%} {_f(a['tracking_rmse'], 4)} → "
+                             f"{b['success_rate']:.0%} {_f(b['tracking_rmse'], 4)}")
+    if diffs:
+        lines += ["", "The `none` rows are re-run with the current code; where they differ from the nominal-terrain "
+                  f"section above (success, or RMSE by more than {CLOSE:.0%}; nominal → `none`): " + "; ".join(diffs)
+                  + ". Rerun `python train/evaluate_drivers.py` (all sections) to bring the other sections up to date."]
+    return lines
+
+
+def _yes_no(b):
+    return "yes" if b else "**no**"
+
+
+def format_effects(name, eff):
+    """One line per case for the console."""
+    out = [f"{name} under the unmodelled effects ({eff['seconds']:.0f} s):"]
+    for eid, res in [("none", eff["reference"])] + list(eff["cases"].items()):
+        if "skipped" in res:
+            out.append(f"  {eid:24s} skipped: {res['skipped']}")
+            continue
+        sm = {m: r["summary"] for m, r in res["methods"].items()}
+        c = res["comparison"]
+        out.append(f"  {eid:24s} " + "  ".join(f"{m} {sm[m]['success_rate']:.0%} {_f(sm[m]['tracking_rmse'], 4)}"
+                                               for m in ("learned", "classical", "open_loop"))
+                   + f"  beats PI: {c['classical']['beats']}  both: {c['beats_both']}"
+                   + ("" if eid == "none" or res["changed"] else "  (unchanged)"))
+    return "\n".join(out)
 
 
 def write_driver_summary(results):
@@ -95,6 +343,7 @@ def write_md(results):
     for name, rec in results.items():
         cells = [_cell(rec["nominal"])] + [_cell(rec["soils"][s]) for s in SOILS] + [_cell(rec["table_5_6"])]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += effects_md(results)
     (ROOT / "train" / "results.md").write_text("\n".join(lines) + "\n")
 
 
@@ -111,4 +360,10 @@ def _f(x, nd):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or None)
+    ap = argparse.ArgumentParser(description="Evaluate the shipped drivers against the baselines (train/results.*).")
+    ap.add_argument("drivers", nargs="*", help="only these drivers (<EnvName>-<terrain>, e.g. JTurn-v0-asphalt)")
+    ap.add_argument("--effects-only", action="store_true",
+                    help="run only the 'effects' section (one unmodelled effect at a time, library defaults) and "
+                         "keep the other sections of train/results.json")
+    a = ap.parse_args()
+    main(a.drivers or None, effects_only=a.effects_only)
