@@ -13,8 +13,8 @@ the base with the control's factors as fitted on the same fold, or the base itse
 fits the fold's calibration data better (:func:`.fit.fit_candidate`; the control can absorb part of a
 strong effect with the wrong physics, and the effect must not inherit that). The effect's family then
 contains the fitted control (its anchor, :meth:`Candidate.anchor_unit`), so "the effect beats the
-control" compares nested models, and a small perturbation of the soil or of b*_int (which the control
-absorbs) does not mask a weak effect or pass for one.
+control" compares nested models, and a small perturbation of the soil or of b*_int, which the control
+absorbs, is not credited to the effect.
 
 Ranges are the physically plausible ones (the effect classes' ``bounds`` are wider, for users):
 
