@@ -57,6 +57,7 @@ COMPLEXITY = 0.02
 MIN_SHRINK = 0.10
 SENSOR = "sensor_artifacts"
 N_BOOT = 300
+GAP_LEFT_BY = {NONE: "left by the base model", RECALIBRATE: "that recalibrating the base leaves"}
 
 RULE_TEXT = (
     "Every effect is fitted on top of the `recalibrate_base` control: fold by fold, on the base parameters the "
@@ -272,15 +273,14 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
                 "p_used": ev["gap_p"]}
     # (5) is about the effect's own part: where the control was fitted, an effect stands on it (and so shares
     # what tuning closes), and its shrink counts from the gap the better of `none` and the control leaves
-    gap_ref = cand[NONE]["heldout_gap"]
-    left_by = "left by the base model"
-    if RECALIBRATE in cand and cand[RECALIBRATE]["heldout_gap"] < gap_ref:
-        gap_ref, left_by = cand[RECALIBRATE]["heldout_gap"], "that recalibrating the base leaves"
+    ref = RECALIBRATE if RECALIBRATE in cand and cand[RECALIBRATE]["heldout_gap"] < cand[NONE]["heldout_gap"] else NONE
+    gap_ref = cand[ref]["heldout_gap"]
+    left_by = GAP_LEFT_BY[ref]
 
     def own_shrink(e):
         return (1.0 - cand[e]["heldout_gap"] / gap_ref) if gap_ref > 0 else 0.0
 
-    out["gap_reference"] = left_by
+    out["gap_reference"] = ref
 
     def judge(e):
         """(named effect, ok, p_used, why) for physical effect ``e`` (or the instruments alone)."""
@@ -361,12 +361,12 @@ def shrink_interval(data, sq_before, sq_after, point, seed=0, n_boot=N_BOOT) -> 
     return centred_interval(point, np.array(vals))
 
 
-def verdict_line(effect, confidence, shrink, ci, ins, ins_ci, reason, flags, own=None, left_by="") -> str:
+def verdict_line(effect, confidence, shrink, ci, ins, ins_ci, reason, flags, own=None, reference=NONE) -> str:
     fl = f" [{'; '.join(flags)}]" if flags else ""
     if effect == NONE:
         return f"none (confidence {confidence:.2f}): {reason}{fl}"
-    own_txt = (f"; by itself {100 * own:.0f}% of the held-out gap {left_by}" if own is not None and
-               left_by.startswith("that recal") else "")
+    own_txt = (f"; by itself {100 * own:.0f}% of the held-out gap {GAP_LEFT_BY[reference]}"
+               if own is not None and reference == RECALIBRATE else "")
     return (f"{effect} (confidence {confidence:.2f}): held-out gap shrink {100 * shrink:.0f}% (95% CI {100 * ci[0]:.0f}"
             f"-{100 * ci[1]:.0f}%), in-sample {100 * ins:.0f}% (95% CI {100 * ins_ci[0]:.0f}-{100 * ins_ci[1]:.0f}%)"
             f"{own_txt}{fl}")
@@ -541,7 +541,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
                            restricted=bool(candidates))
     confidence = rule["confidence"] * flag_penalty(flags)
     line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags, rule.get("own_shrink"),
-                        rule.get("gap_reference", ""))
+                        rule.get("gap_reference", NONE))
     rows = cell_table(data, base.full_pred, chosen.heldout_pred)
     cell_ci(data, rows, sq_base, sq_after, seed=seed)
     significant = rule["gap_significant"]

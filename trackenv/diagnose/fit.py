@@ -33,9 +33,10 @@ is scored with the speed averaged over each of ``ENCODER_WINDOWS`` (free: no new
 window is selected with the point.
 
 An effect that stands on the control (:attr:`.candidates.Candidate.on`) has a different base model per
-fold: the control's factors fitted on that fold, or the base itself. Each fold × base (*branch*) then
-gets its own Latin-hypercube points, the first of them the branch's anchor; a fold's cross-entropy round
-stays in the branch of its best point, and the polish refines that branch.
+fold: the control's factors fitted on that fold, or the base itself (*branches*). The global design
+above is scored on the base itself; each fold × control branch gets its own Latin-hypercube points, the
+first of them the branch's anchor. A fold's cross-entropy round stays in the branch of its best point,
+and the polish refines that branch.
 
 Stage 2, gradient polish (:mod:`.polish`): each fold's best point is refined by Levenberg-Marquardt
 on the fold's weighted residuals, with the Jacobian from ``jax.jacfwd`` through the batched simulator
