@@ -241,6 +241,27 @@ def test_the_rule_tries_the_next_effect_when_the_best_scoring_one_fails():
     assert v["effect"] == "none" and "recalibrating" in v["reason"], v
 
 
+def test_an_effect_on_the_base_is_named_where_its_fit_on_the_control_inherits_a_bad_extrapolation():
+    """The control, fitted on a test's head, drifts away on its tail; the effect fitted on top of it inherits
+    the drift and loses to the base model, while the same effect fitted on the base itself (the
+    ``@base`` member) removes the bias. The rule names the effect (not the member) and reports which fit
+    carried it; without the ``@base`` member, ``none``."""
+    from trackenv.diagnose.core import decide
+
+    rng = np.random.default_rng(2)
+    K, sigma = 3000, 0.1
+    n = sigma * rng.standard_normal(K)
+    drift = np.linspace(0.0, 0.6, K)
+    errors = {"none": 0.1 + n, "recalibrate_base": 0.1 + drift + n, "internal_resistance": 0.05 + drift + n,
+              "internal_resistance@base": 0.02 + n}
+    v = decide(_evidence(errors, sigma))
+    assert v["effect"] == "internal_resistance" and v["member"] == "internal_resistance@base", v
+    assert v["own_shrink"] > 0.5, v
+    del errors["internal_resistance@base"]
+    v = decide(_evidence(errors, sigma))
+    assert v["effect"] == "none" and "does not beat the base model" in v["reason"], v
+
+
 def test_the_shrink_threshold_counts_only_what_the_effect_adds_to_the_control():
     """The control closes most of the gap; an effect on top of it that adds a tiny but systematic improvement
     passes the significance tests, yet is not named: it closes < 10% of the gap the control leaves."""

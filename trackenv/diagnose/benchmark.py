@@ -200,7 +200,7 @@ def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True,
         v = decide(ev, alpha=ALPHA if alpha is None else alpha, **rule)
         c = ev["candidates"]
         row.update({"verdict": v["effect"], "confidence": v["confidence"], "reason": v["reason"],
-                    "shrink": c[v["effect"]]["heldout_shrink"] if v["effect"] != NONE else 0.0,
+                    "shrink": c[v.get("member", v["effect"])]["heldout_shrink"] if v["effect"] != NONE else 0.0,
                     "own_shrink": v.get("own_shrink"), "visibility": answers[row["case"]].get("max_visibility")})
         rows.append(row)
     if write:

@@ -79,6 +79,12 @@ class KnotInternalResistance(Effect):
 NONE = "none"
 RECALIBRATE = "recalibrate_base"
 ON = "on."  # prefix of the values of the candidate an effect stands on (:attr:`Candidate.on`)
+ON_BASE = "@base"  # suffix of the fit of an effect on the base model itself, beside its fit on the control
+
+
+def effect_of(member: str) -> str:
+    """The effect a fitted member is a form of (``"internal_resistance@base"`` -> ``"internal_resistance"``)."""
+    return member[: -len(ON_BASE)] if member.endswith(ON_BASE) else member
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..compare import json_clean as _clean
 from .batch import FIT_SUBSTEP, BatchSimulator
-from .candidates import NONE, RECALIBRATE, candidate_set
+from .candidates import NONE, ON_BASE, RECALIBRATE, candidate_set, effect_of
 from .data import DiagnosisError, TestData, load_tests
 from .fit import CandidateFit, fit_candidate, make_folds
 from .metrics import (
@@ -60,10 +60,11 @@ N_BOOT = 300
 GAP_LEFT_BY = {NONE: "left by the base model", RECALIBRATE: "that recalibrating the base leaves"}
 
 RULE_TEXT = (
-    "Every effect is fitted on top of the `recalibrate_base` control: fold by fold, on the base parameters the "
-    "control fitted on that fold's calibration data, or on the base model itself where that fits the fold's "
-    "calibration data better; an effect's family thus contains the fitted control and (3) compares nested "
-    "models. The physical effects are tried in the order of their held-out scores; the first for which all "
+    "Every physical effect is fitted twice: on top of the `recalibrate_base` control (fold by fold, on the base "
+    "parameters the control fitted on that fold's calibration data; its family thus contains the fitted control "
+    "and (3) compares nested models) and on the base model itself (`<effect>@base`, whose predictions do not "
+    "inherit the control's extrapolation). Both fits are members of the max-T families below. The members are "
+    "tried in the order of their held-out scores; the effect of the first for which all "
     "of these hold is named, each at alpha = 0.05 (an intersection-union rule: naming an "
     "effect when none beats the base model, or when tuning the base parameters does as well, has probability "
     "<= alpha; the max-T corrections make trying every effect no more likely to name one under the null): "
@@ -301,19 +302,20 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
                               f"(< {100 * min_shrink:.0f}%)")
         return e, ok, p_used, why
 
-    # the physical effects in the order of their held-out scores: the first that passes is named (the tests
-    # are max-T corrected over the family, so trying each does not inflate the false-positive rate)
+    # the physical effects' fits (on the control and on the base) in the order of their held-out scores: the
+    # effect of the first that passes is named (the tests are max-T corrected over the family, so trying
+    # each does not inflate the false-positive rate)
     why = ""
     for e in sorted(physical, key=score.get) or [SENSOR]:
         e, ok, p_used, why_e = judge(e)
         why = why or why_e
         if ok:
-            return {**out, "effect": e, "reason": "passes the tests of the rule", "confidence": max(0.0, 1.0 - p_used),
-                    "p_used": p_used, "own_shrink": own_shrink(e)}
+            return {**out, "effect": effect_of(e), "member": e, "reason": "passes the tests of the rule",
+                    "confidence": max(0.0, 1.0 - p_used), "p_used": p_used, "own_shrink": own_shrink(e)}
     if SENSOR in cand and physical:
         ok_s, p_s, _ = passes(SENSOR)
         if ok_s and score[SENSOR] < score[NONE] and own_shrink(SENSOR) >= min_shrink:
-            return {**out, "effect": SENSOR, "reason": "passes the tests of the rule",
+            return {**out, "effect": SENSOR, "member": SENSOR, "reason": "passes the tests of the rule",
                     "confidence": max(0.0, 1.0 - p_s), "p_used": p_s, "own_shrink": own_shrink(SENSOR)}
     # none: confidence = how far the strongest effect was from passing
     p_min = min((max(p_of(x, NONE, effects), p_of(x, RECALIBRATE, effects) or 0.0) for x in effects), default=1.0)
@@ -480,25 +482,30 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         else:
             F = len(folds) + 1
             m = max(3, int(np.ceil(search_points / F)))
-            planned += len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters)
+            k = 2 if (c.is_effect and any(x.name == RECALIBRATE for x in cands)) else 1  # branches fitted
+            planned += k * (len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters))
     bar = tqdm(total=planned, desc="diagnose", unit="sim", disable=not progress, leave=False)
     fits: dict[str, CandidateFit] = {}
-    # none, then the control, then every effect on top of the control's fit (fold by fold; each fold may
-    # instead keep the effect on the unrecalibrated base, whichever fits its calibration data better)
+    # none, then the control, then every effect twice from one shared search: on top of the control's fit
+    # (fold by fold) and on the base model itself (`<effect>@base`)
     order = sorted(cands, key=lambda c: (c.name != NONE, c.name != RECALIBRATE))
     t_fit = {}
     for c in order:
         bar.set_postfix_str(c.name)
         t0 = time.perf_counter()
-        below = None
         if c.is_effect and RECALIBRATE in fits:
             rc = fits[RECALIBRATE]
             c = c.standing_on(rc.candidate)
             below = [[dict(fd.params), dict(rc.candidate.anchor)] for fd in [*rc.folds, rc.full]]
-        fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
-                                     polish_iters=polish_iters, jacobian=jacobian,
-                                     progress=bar.update, below=below)
-        t_fit[c.name] = time.perf_counter() - t0
+            on_control, on_base = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
+                                                polish_iters=polish_iters, jacobian=jacobian,
+                                                progress=bar.update, below=below, each_branch=True)
+            fits[c.name], fits[c.name + ON_BASE] = on_control, on_base
+            t_fit[c.name] = t_fit[c.name + ON_BASE] = (time.perf_counter() - t0) / 2  # one search, shared
+        else:
+            fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
+                                         polish_iters=polish_iters, jacobian=jacobian, progress=bar.update)
+            t_fit[c.name] = time.perf_counter() - t0
     bar.close()
 
     base = fits[NONE]
@@ -512,7 +519,9 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     for n, f in fits.items():
         rk = ev["candidates"][n]
         ranking.append({
-            "effect": n, "description": f.candidate.description, "n_params": f.candidate.n_params,
+            "effect": n, "n_params": f.candidate.n_params,
+            "description": f.candidate.description + (" (on the base model itself)" if n.endswith(ON_BASE) else
+                                                      " (on the fitted control)" if f.candidate.on is not None else ""),
             "heldout_nrmse": overall_nrmse(data, ev["_sq_held"][n]), "heldout_gap": rk["heldout_gap"],
             "heldout_gap_range": overall_gap_range(data, ev["_sq_held"][n]),
             "insample_gap": rk["insample_gap"],
@@ -527,7 +536,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "simulations": f.n_simulations, "fit_time_s": t_fit[n], "notes": f.notes,
         })
     ranking.sort(key=lambda r: r["score"])
-    chosen_name = effect if effect != NONE else best
+    chosen_name = rule.get("member", effect) if effect != NONE else best
     chosen = fits[chosen_name]
     sq_after = ev["_sq_held"][chosen_name]
     held_base = ev["_sq_base_held"]

@@ -210,9 +210,10 @@ class _Pool:
             self.owner.append(owner[s])
             self.window.append(self.windows[c % nw])
 
-    def select(self, fold: int, weights: np.ndarray, n_folds: int):
-        """The points fold ``fold`` may use (global ones, and its own in every branch), best first."""
-        idx = [i for i, o in enumerate(self.owner) if o == -1 or o % n_folds == fold]
+    def select(self, fold: int, weights: np.ndarray, n_folds: int, keep=None):
+        """The points fold ``fold`` may use (global ones, and its own in every branch; only owners for which
+        ``keep(owner)`` is true, if given), best first."""
+        idx = [i for i, o in enumerate(self.owner) if (o == -1 or o % n_folds == fold) and (keep is None or keep(o))]
         with np.errstate(invalid="ignore"):
             score = np.array([np.sum(np.where(weights > 0, self.loss[i] * weights, 0.0)) for i in idx])
         score = np.where(np.isfinite(score), score, np.inf)
@@ -226,7 +227,8 @@ def _losses(tests, pred):
 
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
                   min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None,
-                  jacobian: str = "secant", below: list | None = None) -> CandidateFit:
+                  jacobian: str = "secant", below: list | None = None,
+                  each_branch: bool = False) -> CandidateFit | list[CandidateFit]:
     """Fit ``cand`` on every fold and on all the data (see the module docstring).
 
     ``below``: where ``cand`` stands on another candidate (:attr:`.candidates.Candidate.on`), per fit (the
@@ -235,6 +237,9 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     fit: its points are shared by all folds, as without ``below``. Each fold searches every *branch* (one
     per set, each holding its own anchor) and keeps the branch of its best calibration loss; a fold's
     held-out prediction therefore uses nothing fitted on its held-out data.
+
+    ``each_branch``: instead, search and polish every branch separately (sharing the global design) and
+    return one :class:`CandidateFit` per branch, in the order of the sets in ``below``.
     """
     tests = sim.tests
     n = len(tests)
@@ -249,6 +254,14 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
 
     if below is not None and any(b[-1] != below[0][-1] for b in below):
         raise ValueError(f"{cand.name}: the last parameter set of 'below' must be the same for every fit")
+
+    def branch_of(o):
+        return n_branch - 1 if o < 0 else o // F
+
+    branches = list(range(n_branch)) if (each_branch and below is not None) else [None]
+
+    def keep_branch(b):
+        return None if b is None else (lambda o: branch_of(o) == b)
 
     def below_of(o):
         """The parameter set that owner ``o`` (fold ``o mod F``, branch ``o // F``; -1: shared, the last) stands on."""
@@ -266,7 +279,7 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     n_sims = 0
     n_div = 0
     p = cand.n_params
-    last_gain = np.zeros(F)
+    last_gain = np.zeros((n_branch, F))
     if p == 0:
         if below is not None:
             raise ValueError(f"{cand.name}: a candidate without parameters cannot stand on another one")
@@ -299,19 +312,20 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
         for r in range(rounds):
             pts, owner, before = [], [], []
             for f, fd in enumerate(fold_defs):
-                order, score = pool.select(f, fd.weights, F)
-                before.append(score[0])
-                elite = np.stack([pool.unit[i] for i in order[:4]])
-                centre = elite[0]
-                spread = np.maximum(elite.std(axis=0), 0.04) * (0.6**r)
-                new = np.clip(centre + spread * rng.standard_normal((m, p)), 0.0, 1.0)
-                pts.append(new)
-                o = pool.owner[order[0]]  # new points in the branch of the best one
-                if below is None:
-                    o = f
-                elif o < 0:  # the shared branch, owned by this fold
-                    o = f + F * (n_branch - 1)
-                owner += [o] * m
+                for b in branches:
+                    order, score = pool.select(f, fd.weights, F, keep_branch(b))
+                    before.append(score[0])
+                    elite = np.stack([pool.unit[i] for i in order[:4]])
+                    centre = elite[0]
+                    spread = np.maximum(elite.std(axis=0), 0.04) * (0.6**r)
+                    new = np.clip(centre + spread * rng.standard_normal((m, p)), 0.0, 1.0)
+                    pts.append(new)
+                    o = pool.owner[order[0]]  # new points in the branch of the best one
+                    if below is None:
+                        o = f
+                    elif o < 0:  # the shared branch, owned by this fold
+                        o = f + F * (n_branch - 1)
+                    owner += [o] * m
             pts = np.concatenate(pts)
             pred, div = sim.run(cand, values(pts, owner), progress, windows)
             loss = _losses(tests, pred)
@@ -319,18 +333,34 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
             pool.add(pts, loss, pred, owner)
             n_sims += n * pts.shape[0]
             n_div += int(div.sum())
+            k = 0
             for f, fd in enumerate(fold_defs):
-                _, score = pool.select(f, fd.weights, F)
-                last_gain[f] = (before[f] - score[0]) / max(before[f], 1e-12) if np.isfinite(before[f]) else 1.0
+                for b in branches:
+                    _, score = pool.select(f, fd.weights, F, keep_branch(b))
+                    last_gain[b or 0, f] = ((before[k] - score[0]) / max(before[k], 1e-12)
+                                            if np.isfinite(before[k]) else 1.0)
+                    k += 1
+    n_search = n_sims
+    out = [_finish(sim, cand, tests, fold_defs, pool, F, keep_branch(b), below_of if below is not None else None,
+                   below_keys, rounds, last_gain[b or 0], polish_iters, jacobian, progress, n_search, n_div)
+           for b in branches]
+    return out if each_branch and below is not None else out[0]
+
+
+def _finish(sim, cand, tests, fold_defs, pool, F, keep, below_of, below_keys, rounds, last_gain, polish_iters,
+            jacobian, progress, n_sims, n_div) -> CandidateFit:
+    """A fit from the searched pool (points of one branch if ``keep``): each fold's best point, polished."""
+    n = len(tests)
+    p = cand.n_params
     # the search's best point per fold
     best_i = []
     search_score = []
     for f, fd in enumerate(fold_defs):
-        order, score = pool.select(f, fd.weights, F)
+        order, score = pool.select(f, fd.weights, F, keep)
         best_i.append(order[0])
         search_score.append(float(score[0]))
     units = [np.asarray(pool.unit[i], np.float64) for i in best_i]
-    chosen = [below_of(pool.owner[i]) for i in best_i] if below is not None else None
+    chosen = [below_of(pool.owner[i]) for i in best_i] if below_of is not None else None
     wins = [pool.window[i] for i in best_i]
     preds = [pool.pred[i] for i in best_i]
     scores = list(search_score)
@@ -363,7 +393,7 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
         params = {k: float(v[0]) for k, v in cand.physical(unit[None]).items()} if p else {}
         if wins[f] is not None:
             params["encoder_window"] = float(wins[f])
-        if below is not None:
+        if chosen is not None:
             params.update({f"{cand.on.name}.{k}": float(chosen[f][k]) for k in below_keys})
         lp = np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
                        for j in range(n)])  # (n, 2)
