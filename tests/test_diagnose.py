@@ -261,6 +261,11 @@ def test_an_effect_on_the_base_is_named_where_its_fit_on_the_control_inherits_a_
     del errors["internal_resistance@base"]
     v = decide(_evidence(errors, sigma))
     assert v["effect"] == "none" and "does not beat the base model" in v["reason"], v
+    # the instruments alone, fitted on the base, explain it as well: the physical effect gives way (condition 4)
+    errors["internal_resistance@base"] = 0.02 + n
+    errors["sensor_artifacts@base"] = 0.02 + n
+    v = decide(_evidence(errors, sigma))
+    assert v["effect"] == "sensor_artifacts" and v["member"] == "sensor_artifacts@base", v
 
 
 def test_the_shrink_threshold_counts_only_what_the_effect_adds_to_the_control():

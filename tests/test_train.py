@@ -7,6 +7,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 
@@ -88,10 +89,20 @@ def test_train_writes_zip_record_and_checkpoints_and_resumes(tiny_policy):
     assert info["n_timesteps"] >= 64 and info["train_seconds"] > 0 and 0 < info["env_step_share"] <= 1
     assert info["seed"] == 0 and info["config"]["n_envs"] == 4
     assert drivers.latest_checkpoint(res.model_path.parent) is not None
+    first = pd.read_csv(res.model_path.parent / "GoStop-v0-dry_sand.curve.csv")
     cfg = dict(info["config"])
     r2 = drivers.train("go_stop", "dry_sand", "ppo", config={"default": cfg}, timesteps=128, out_dir=res.model_path.parent,
                        resume=True, progress_bar=False, tensorboard=False)
     assert r2.info["resumed_from"] and r2.info["n_timesteps"] >= 128
+    # the learning curve: one row per rollout, continued across the resume, and its figure
+    curve = pd.read_csv(r2.model_path.parent / "GoStop-v0-dry_sand.curve.csv")
+    assert list(curve.columns) == ["timesteps", "wall_s", "env_s", "mean_return", "success_rate", "episodes"]
+    assert len(first) == 64 // (4 * 16) and len(curve) == 128 // (4 * 16)
+    assert curve["timesteps"].is_monotonic_increasing and curve["wall_s"].is_monotonic_increasing
+    assert curve["timesteps"].iloc[-1] == r2.info["n_timesteps"]
+    assert curve.iloc[: len(first)].equals(first)
+    assert (curve["env_s"] <= curve["wall_s"]).all() and (curve["env_s"] > 0).all()
+    assert (r2.model_path.parent / "GoStop-v0-dry_sand.curve.png").stat().st_size > 10_000
 
 
 def test_load_warns_pickle_and_checks_spaces(tiny_policy, capsys):

@@ -239,7 +239,10 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     score = {n: c["heldout_loss"] * (1.0 + COMPLEXITY * c["n_params"]) for n, c in cand.items()}
     best = min(score, key=score.get)
     effects = [n for n, c in cand.items() if c["is_effect"]]
-    physical = [n for n in effects if n != SENSOR]
+    # the instruments-only candidate's fits (on the control, on the base): the better-scoring one competes
+    sensors = [n for n in effects if effect_of(n) == SENSOR]
+    sensor = min(sensors, key=score.get) if sensors else None
+    physical = [n for n in effects if effect_of(n) != SENSOR]
     tests = {}
 
     def p_of(x, ref, family):
@@ -286,12 +289,12 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     def judge(e):
         """(named effect, ok, p_used, why) for physical effect ``e`` (or the instruments alone)."""
         ok, p_used, why = passes(e)
-        if SENSOR in cand and e != SENSOR:
-            ps = p_of(e, SENSOR, physical)
+        if sensor is not None and effect_of(e) != SENSOR:
+            ps = p_of(e, sensor, physical)
             if ps >= alpha:
-                ok_s, p_s, _ = passes(SENSOR)
+                ok_s, p_s, _ = passes(sensor)
                 if ok_s:
-                    e, ok, p_used, why = SENSOR, True, p_s, ""
+                    e, ok, p_used, why = sensor, True, p_s, ""
                 elif ok:
                     ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; "
                                                   f"p = {ps:.2g} ≥ {alpha:.2g})")
@@ -306,17 +309,17 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     # effect of the first that passes is named (the tests are max-T corrected over the family, so trying
     # each does not inflate the false-positive rate)
     why = ""
-    for e in sorted(physical, key=score.get) or [SENSOR]:
+    for e in sorted(physical, key=score.get) or ([sensor] if sensor else []):
         e, ok, p_used, why_e = judge(e)
         why = why or why_e
         if ok:
             return {**out, "effect": effect_of(e), "member": e, "reason": "passes the tests of the rule",
                     "confidence": max(0.0, 1.0 - p_used), "p_used": p_used, "own_shrink": own_shrink(e)}
-    if SENSOR in cand and physical:
-        ok_s, p_s, _ = passes(SENSOR)
-        if ok_s and score[SENSOR] < score[NONE] and own_shrink(SENSOR) >= min_shrink:
-            return {**out, "effect": SENSOR, "member": SENSOR, "reason": "passes the tests of the rule",
-                    "confidence": max(0.0, 1.0 - p_s), "p_used": p_s, "own_shrink": own_shrink(SENSOR)}
+    if sensor is not None and physical:
+        ok_s, p_s, _ = passes(sensor)
+        if ok_s and score[sensor] < score[NONE] and own_shrink(sensor) >= min_shrink:
+            return {**out, "effect": SENSOR, "member": sensor, "reason": "passes the tests of the rule",
+                    "confidence": max(0.0, 1.0 - p_s), "p_used": p_s, "own_shrink": own_shrink(sensor)}
     # none: confidence = how far the strongest effect was from passing
     p_min = min((max(p_of(x, NONE, effects), p_of(x, RECALIBRATE, effects) or 0.0) for x in effects), default=1.0)
     return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, p_min), "p_used": p_min}

@@ -17,6 +17,7 @@ time spent stepping the environment (:mod:`trackenv.drivers.wrappers`). Outputs 
 - ``<EnvName>-<terrain>.json``: task, terrain, algorithm, seed, the resolved config, timesteps, wall
   time [s], time in env.step / env.reset [s], the command that reproduces it, library versions; paths
   inside the repository are written relative to it;
+- ``<EnvName>-<terrain>.curve.csv`` / ``.curve.png``: the learning curve (:mod:`trackenv.drivers.curves`);
 - ``checkpoints/``: ``rl_model_<steps>_steps.zip`` every ``checkpoint_freq`` steps (``--resume``
   continues from the latest one, the step counter included);
 - ``tb/``: TensorBoard logs (when ``tensorboard`` is installed).
@@ -50,6 +51,7 @@ from .config import (
     resolve_task,
     resolve_terrain,
 )
+from .curves import LearningCurve, curve_figure, read_curve, write_curve
 from .policy import load_policy
 from .wrappers import ErrorPenalty, ResidualVecEnv, StepTimer
 
@@ -181,11 +183,16 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
                                  tensorboard_log=tb, verbose=verbose, **algo_kwargs(cfg))
     done_before = int(model.num_timesteps)
     remaining = max(0, cfg["n_timesteps"] - done_before)
-    callback = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
-                                  save_path=str(run / "checkpoints"), name_prefix="rl_model")
+    checkpoints = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
+                                     save_path=str(run / "checkpoints"), name_prefix="rl_model")
+    run_curve = run / "curve.csv"
+    curve = LearningCurve(timer, every=0 if algo == "ppo" else max(cfg["n_envs"], cfg["n_timesteps"] // 200),
+                          offset=(done_before, float(previous.get("train_seconds", 0.0)),
+                                  float(previous.get("env_step_seconds", 0.0))),
+                          rows=read_curve(run_curve) if (ckpt is not None and run_curve.is_file()) else None)
     t0 = time.perf_counter()
-    model.learn(total_timesteps=remaining, callback=callback, progress_bar=progress_bar, tb_log_name=name,
-                reset_num_timesteps=ckpt is None)
+    model.learn(total_timesteps=remaining, callback=[checkpoints, curve], progress_bar=progress_bar,
+                tb_log_name=name, reset_num_timesteps=ckpt is None)
     wall = time.perf_counter() - t0
     model_path = out / f"{name}.zip"
     model.trackenv_driver = driver_meta  # saved in the zip's data; read back by trackenv.drivers.policy.Learned
@@ -206,6 +213,10 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         "versions": _versions(), "model_bytes": model_path.stat().st_size,
     }
     info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)
+    write_curve(curve.rows, run_curve)
+    curve_csv = write_curve(curve.rows, out / f"{name}.curve.csv")
+    curve_png = curve_figure(curve.rows, f"{name} ({algo}, seed {seed})", out / f"{name}.curve.png")
+    info["curve_csv"], info["curve_png"] = repo_relative(curve_csv), repo_relative(curve_png)
     info_path = out / f"{name}.json"
     info_path.write_text(json.dumps(info, indent=2) + "\n")
     (run / "progress.json").write_text(json.dumps(info, indent=2) + "\n")
