@@ -186,17 +186,18 @@ def run_benchmark(out_dir: str | Path, n_cases: int, seed: int = 0, null_fractio
     return _write(out, rows, seed, {"generation_s": t_gen, "total_s": time.perf_counter() - t0})
 
 
-def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True, **rule) -> dict:
+def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True, exclude=(), **rule) -> dict:
     """Re-apply the verdict rule to every cached case of a benchmark (no fitting): the new summary; with
-    ``write``, ``benchmark.{json,md}`` and the figures are rewritten from it."""
-    from .core import ALPHA, decide, load_evidence
+    ``write``, ``benchmark.{json,md}`` and the figures are rewritten from it. ``exclude``: candidates left
+    out of the cached evidence (:func:`.core.without`)."""
+    from .core import ALPHA, decide, load_evidence, without
 
     out = Path(out_dir)
     answers = {a["case"]: a for a in json.loads((out / "answers.json").read_text())}
     rows = []
     for row_file in sorted((out / "reports").glob("*/row.json")):
         row = json.loads(row_file.read_text())
-        ev = load_evidence(row_file.parent)
+        ev = without(load_evidence(row_file.parent), exclude)
         v = decide(ev, alpha=ALPHA if alpha is None else alpha, **rule)
         c = ev["candidates"]
         row.update({"verdict": v["effect"], "confidence": v["confidence"], "reason": v["reason"],
