@@ -515,9 +515,10 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
                                                 polish_iters=polish_iters, jacobian=jacobian,
                                                 progress=bar.update, below=below, each_branch=True)
             fits[c.name] = on_control
+            t_fit[c.name] = time.perf_counter() - t0  # one search for both fits
             if c.name != SENSOR:  # the instruments-only candidate competes only as fitted on the control
                 fits[c.name + ON_BASE] = on_base
-            t_fit[c.name] = time.perf_counter() - t0  # one search for both fits
+                t_fit[c.name + ON_BASE] = t_fit[c.name]
         else:
             fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
                                          polish_iters=polish_iters, jacobian=jacobian, progress=bar.update)
