@@ -384,8 +384,8 @@ def test_viscous_base_gap_is_internal_resistance_in_cruise_current(viscous_go_st
 
 def test_viscous_base_gap_is_internal_resistance_or_silence(viscous_go_stop):
     """The thesis's viscous law is the wrong form: the twin's truth is a constant internal resistance. The
-    diagnosis names it, or (measured: p = 0.074 against ammeter zero offsets, which also shift the cruise
-    current) stays silent for that stated reason; it never names another effect."""
+    diagnosis names it (measured: through its fit on the base, confidence 0.77), or stays silent for a
+    stated reason (ammeter zero offsets also shift the cruise current); it never names another effect."""
     d, _ = viscous_go_stop
     v = d.verdict
     if v["effect"] == "internal_resistance":
