@@ -1,6 +1,10 @@
-"""Hypothesis profiles: ``ci`` (default, modest budgets) and ``thorough`` (``HYPOTHESIS_PROFILE=thorough``)."""
+"""Test-wide setup: Hypothesis profiles (``ci`` by default, ``thorough`` with ``HYPOTHESIS_PROFILE=thorough``), and
+JAX's compiled programs released after each test module."""
 
+import gc
 import os
+
+import pytest
 
 try:
     from hypothesis import HealthCheck, settings
@@ -13,11 +17,6 @@ else:
     settings.register_profile("ci", max_examples=8, derandomize=True, database=None, **common)
     settings.register_profile("thorough", max_examples=200, **common)
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
-
-
-import gc
-
-import pytest
 
 
 @pytest.fixture(autouse=True, scope="module")

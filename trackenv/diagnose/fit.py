@@ -340,9 +340,8 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
                     last_gain[b or 0, f] = ((before[k] - score[0]) / max(before[k], 1e-12)
                                             if np.isfinite(before[k]) else 1.0)
                     k += 1
-    n_search = n_sims
     out = [_finish(sim, cand, tests, fold_defs, pool, F, keep_branch(b), below_of if below is not None else None,
-                   below_keys, rounds, last_gain[b or 0], polish_iters, jacobian, progress, n_search, n_div)
+                   below_keys, rounds, last_gain[b or 0], polish_iters, jacobian, progress, n_sims, n_div)
            for b in branches]
     return out if each_branch and below is not None else out[0]
 
