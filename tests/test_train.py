@@ -33,6 +33,8 @@ def test_shipped_configs_validate():
             for terrain in ("dry_sand", "asphalt"):
                 cfg = drivers.load_config(algo, task, terrain)
                 assert cfg["n_timesteps"] > 0 and cfg["policy"] == "MlpPolicy"
+    plain = drivers.load_config("ppo", "go_stop", "asphalt", drivers.ROOT / "configs" / "train" / "ppo_plain.yaml")
+    assert plain["residual"] == 0.0 and plain["policy_kwargs"]["log_std_init"] == -2.2
 
 
 def test_unknown_config_key_names_file_and_key(tmp_path):
@@ -50,6 +52,19 @@ def test_unknown_config_key_names_file_and_key(tmp_path):
     bad.write_text(yaml.safe_dump({"default": {"n_timesteps": 1000, "buffer_size": 10}}))
     with pytest.raises(ConfigError, match="buffer_size"):
         drivers.load_config("ppo", "go_stop", "dry_sand", bad)
+
+
+def test_config_extends_another_and_overrides_key_by_key(tmp_path):
+    f = tmp_path / "plain.yaml"
+    f.write_text("extends: ppo.yaml\ndefault:\n  residual: 0.0\n  policy_kwargs: {log_std_init: -2.0}\n")
+    base = drivers.load_config("ppo", "lane_change", "asphalt")
+    cfg = drivers.load_config("ppo", "lane_change", "asphalt", f)
+    assert cfg["residual"] == 0.0 and base["residual"] > 0
+    assert cfg["policy_kwargs"] == {**base["policy_kwargs"], "log_std_init": -2.0}
+    assert cfg["error_weight"] == base["error_weight"] == 20.0  # the base file's terrain section still applies
+    f.write_text("extends: nowhere.yaml\ndefault: {}\n")
+    with pytest.raises(ConfigError, match="nowhere.yaml"):
+        drivers.load_config("ppo", "go_stop", "dry_sand", f)
 
 
 def test_unknown_task_terrain_algo_fail_before_training(tmp_path, capsys):
@@ -103,6 +118,21 @@ def test_train_writes_zip_record_and_checkpoints_and_resumes(tiny_policy):
     assert curve.iloc[: len(first)].equals(first)
     assert (curve["env_s"] <= curve["wall_s"]).all() and (curve["env_s"] > 0).all()
     assert (r2.model_path.parent / "GoStop-v0-dry_sand.curve.png").stat().st_size > 10_000
+
+
+def test_randomized_training_names_the_driver_and_records_the_ranges(tmp_path):
+    res = drivers.train("go_stop", "dry_sand", "ppo", timesteps=64, out_dir=tmp_path, progress_bar=False,
+                        tensorboard=False, randomize=True,
+                        config={"default": {"n_envs": 4, "n_timesteps": 64, "n_steps": 16, "batch_size": 32,
+                                            "n_epochs": 1, "policy_kwargs": {"net_arch": [8]},
+                                            "env_kwargs": {"max_time": 0.5}}})
+    assert res.model_path.name == "GoStop-v0-dry_sand-randomized.zip" and res.model_path.is_file()
+    info = res.info
+    assert info["config"]["env_kwargs"]["domain_randomization"] is True
+    assert info["driver_meta"]["domain_randomization"] is True
+    assert info["command"].endswith("--randomize") and info["driver"] == "GoStop-v0-dry_sand-randomized"
+    model = drivers.load_policy(res.model_path, "go_stop", "dry_sand", warn=False)
+    assert model.trackenv_driver["domain_randomization"] is True
 
 
 def test_load_warns_pickle_and_checks_spaces(tiny_policy, capsys):

@@ -153,13 +153,14 @@ def cmd_train(args) -> int:
         command = "trackenv " + " ".join(sys.argv[1:])
     res = train(task, terrain, algo, config=args.config, seed=args.seed, timesteps=args.timesteps, out_dir=args.out,
                 run_dir=args.run_dir, resume=args.resume, progress_bar=not args.no_progress,
-                verbose=1 if args.verbose else 0, command=command)
+                verbose=1 if args.verbose else 0, command=command, randomize=args.randomize)
     i = res.info
     if i["final_mean_return"] is None:
         outcome = "no episode finished during training (no mean return or success rate to report)"
     else:
         outcome = f"final mean return {i['final_mean_return']:.4g}, success {i['final_success_rate']:.2f}"
-    print(f"{driver_name(task, terrain)} ({algo}, seed {args.seed}): {i['n_timesteps']} steps in {i['train_seconds']:.0f} s "
+    print(f"{driver_name(task, terrain, args.randomize)} ({algo}, seed {args.seed}): {i['n_timesteps']} steps in "
+          f"{i['train_seconds']:.0f} s "
           f"(env stepping {100 * i['env_step_share']:.0f}%); {outcome}")
     print(f"wrote {res.model_path} and {res.info_path}")
     return 0
@@ -304,6 +305,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--out", help="folder for <EnvName>-<terrain>.zip/.json (default out/train/<name>-<algo>-s<seed>)")
     t.add_argument("--run-dir", help="folder for checkpoints/ and tb/ (default --out)")
     t.add_argument("--resume", action="store_true", help="continue from the latest checkpoint in the run folder")
+    t.add_argument("--randomize", action="store_true",
+                   help="domain-randomised training: every episode on parameters drawn from the terrain's default "
+                        "ranges (trackenv/envs/randomization.py); the driver is named <EnvName>-<terrain>-randomized")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.add_argument("--verbose", action="store_true", help="print SB3's training table")
     t.set_defaults(func=cmd_train)

@@ -2,9 +2,11 @@
 
     python train/evaluate_drivers.py                    # all sections; writes train/results.json and .md
     python train/evaluate_drivers.py --effects-only     # only the "effects" section (the rest kept)
+    python train/evaluate_drivers.py --sections outside # only the named sections (the rest kept)
     python train/evaluate_drivers.py JTurn-v0-asphalt   # only the named driver(s)
 
-For every driver <EnvName>-<terrain>.zip (trained on the nominal terrain):
+For every driver <EnvName>-<terrain>.zip (trained on the nominal terrain) and
+<EnvName>-<terrain>-randomized.zip (trained with the terrain's default domain-randomisation ranges):
 
 - nominal: ``trackenv evaluate`` on its terrain (learned vs open loop vs classical, 4 seeded episodes;
   the nominal terrain is deterministic, so they agree);
@@ -13,6 +15,9 @@ For every driver <EnvName>-<terrain>.zip (trained on the nominal terrain):
 - Table 5.6 ranges: 16 episodes with the terrain parameters sampled per episode from the default
   domain-randomisation ranges of the driver's terrain (trackenv/envs/randomization.py: sand c 0-3.04 kPa,
   phi 23-38 deg, K 1-5.08 cm, b*_int 0.73-1.17 N m, mass +-10 %; asphalt relative spans), seeds 2000+;
+- outside the ranges: 16 episodes with every parameter drawn from a range wholly outside those
+  (``randomization.outside_ranges``: sand c 3.04-4.5 kPa, phi 18-23 deg, K 5.08-7.5 cm, b*_int
+  1.17-1.45 N m, mass +10-20 %), seeds 3000+;
 - effects: the same three methods on the driver's terrain with one unmodelled effect of docs/model.md §8
   switched on at its library default parameters (``env_kwargs={"effects": [id]}``), each effect that acts
   on that ground (slip_sinkage on deformable ground only, grouser_stiction on hard ground only), plus a
@@ -36,9 +41,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 torch.set_num_threads(1)
 
-from trackenv.drivers import ENV_NAME, evaluate, format_table, load_policy  # noqa: E402
+from trackenv.drivers import ENV_NAME, driver_name, evaluate, format_table, load_policy  # noqa: E402
+from trackenv.drivers.config import RANDOMIZED_SUFFIX  # noqa: E402
 from trackenv.drivers.episodes import jsonable  # noqa: E402
 from trackenv.effects import EFFECT_IDS  # noqa: E402
+from trackenv.envs.randomization import outside_ranges  # noqa: E402
 from trackenv.params import load_params  # noqa: E402
 
 SOILS = ("dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")
@@ -46,50 +53,64 @@ SOILS = ("dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam
 EFFECT_GROUND = {"slip_sinkage": "deformable", "grouser_stiction": "hard"}
 EFFECT_EPISODES = 1  # deterministic environment and effects: one episode is every episode
 EFFECT_SEED = 1000
+HELD_OUT_SOILS = ("dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")  # dry_sand_1 ~ the nominal dry sand
 CLOSE = 0.05  # |learned RMSE / PI RMSE - 1| below this: a close call (the learned driver's RMSE moves by a few %
 #              with float-level changes, e.g. the batch size of the evaluation)
 
 
-def main(only=None, effects_only=False):
+SECTIONS = ("nominal", "soils", "table_5_6", "outside", "effects")
+
+
+def main(only=None, sections=SECTIONS):
+    """Evaluate the drivers named in ``only`` (default all shipped ones) in ``sections``; the other sections of
+    a driver's existing record in train/results.json are kept."""
     drivers = ROOT / "train" / "drivers"
     results = {}
     out_json = ROOT / "train" / "results.json"
     if out_json.is_file():
         results = json.loads(out_json.read_text())
-    for task, env in ENV_NAME.items():
-        for terrain in ("dry_sand", "asphalt"):
-            name = f"{env}-{terrain}"
-            if only and name not in only:
-                continue
-            zp = drivers / f"{name}.zip"
-            if not zp.is_file():
+    partial = set(sections) != set(SECTIONS)
+    runs = [(task, terrain, randomized) for randomized in (False, True) for task in ENV_NAME
+            for terrain in ("dry_sand", "asphalt")]
+    for task, terrain, randomized in runs:
+        name = driver_name(task, terrain, randomized)
+        if only and name not in only:
+            continue
+        zp = drivers / f"{name}.zip"
+        if not zp.is_file():
+            if not randomized:
                 print(f"missing {zp}", flush=True)
-                continue
-            if effects_only and name not in results:
-                print(f"{name}: no record in {out_json.name}; run without --effects-only first", flush=True)
-                continue
-            t0 = time.time()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                model = load_policy(zp, task, terrain, warn=False)
-            if effects_only:
-                rec = dict(results[name])
-            else:
-                rec = {"train": json.loads((drivers / f"{name}.json").read_text())}
-                rec["nominal"] = evaluate(task, terrain, model, episodes=4, seed=1000,
-                                          figures=ROOT / "train" / "figures")
-                rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
-                rec["table_5_6"] = evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
+            continue
+        if partial and name not in results:
+            print(f"{name}: no record in {out_json.name}; run all sections first", flush=True)
+            continue
+        t0 = time.time()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = load_policy(zp, task, terrain, warn=False)
+        rec = dict(results[name]) if partial else {}
+        rec["train"] = json.loads((drivers / f"{name}.json").read_text())
+        if "nominal" in sections:
+            figures = ROOT / "train" / "figures" / ("randomized" if randomized else "")
+            rec["nominal"] = evaluate(task, terrain, model, episodes=4, seed=1000, figures=figures)
+        if "soils" in sections:
+            rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
+        if "table_5_6" in sections:
+            rec["table_5_6"] = evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
+        if "outside" in sections:
+            rec["outside"] = evaluate(task, terrain, model, episodes=16, seed=3000,
+                                      randomize=outside_ranges(load_params(terrain)))
+        if "effects" in sections:
             rec["effects"] = evaluate_effects(task, terrain, model)
-            results[name] = jsonable(rec)
-            out_json.write_text(json.dumps(results, indent=1) + "\n")
-            print(f"{name}: {time.time() - t0:.0f} s", flush=True)
-            if not effects_only:
-                print(format_table(rec["nominal"]), flush=True)
+        results[name] = jsonable(rec)
+        out_json.write_text(json.dumps(results, indent=1) + "\n")
+        print(f"{name}: {time.time() - t0:.0f} s", flush=True)
+        if "nominal" in sections:
+            print(format_table(rec["nominal"]), flush=True)
+        if "effects" in sections:
             print(format_effects(name, results[name]["effects"]), flush=True)
     write_md(results)
-    if not effects_only:  # its nominal metrics are unchanged by the effects section
-        write_driver_summary(results)
+    write_driver_summary(results)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -338,13 +359,75 @@ def write_md(results):
                          f"{_f(s['tracking_rmse'], 4)} {rec['nominal']['rmse_unit'].split()[0]} | {_f(s['completion_time'], 2)} | "
                          f"{_f(s['energy'], 0)} | {_f(s['peak_current'], 1)} |")
     lines += ["", "## Robustness: success rate and tracking RMSE (learned / open loop / classical)", "",
-              "| driver | nominal | " + " | ".join(SOILS) + " | Table 5.6 ranges (16 ep.) |",
-              "|---|---|" + "---|" * len(SOILS) + "---|"]
+              "| driver | nominal | " + " | ".join(SOILS) + " | Table 5.6 ranges (16 ep.) | outside the ranges (16 ep.) |",
+              "|---|---|" + "---|" * len(SOILS) + "---|---|"]
     for name, rec in results.items():
         cells = [_cell(rec["nominal"])] + [_cell(rec["soils"][s]) for s in SOILS] + [_cell(rec["table_5_6"])]
+        cells.append(_cell(rec["outside"]) if "outside" in rec else "-")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines += effects_md(results)
+    lines += randomized_md(results)
+    lines += effects_md({k: v for k, v in results.items() if not k.endswith(RANDOMIZED_SUFFIX)})
     (ROOT / "train" / "results.md").write_text("\n".join(lines) + "\n")
+
+
+def held_out_cases(rec):
+    """(condition, evaluate result) of a driver's record under conditions its training did not see: the
+    held-out soils, the draws outside the randomisation ranges and each unmodelled effect."""
+    out = [(f"soil {s}", rec["soils"][s]) for s in HELD_OUT_SOILS if s in rec.get("soils", {})]
+    if "outside" in rec:
+        out.append(("outside the ranges (16 ep.)", rec["outside"]))
+    for eid, res in rec.get("effects", {}).get("cases", {}).items():
+        if "skipped" not in res:
+            out.append((f"effect {eid}", res))
+    return out
+
+
+def randomized_md(results):
+    """Markdown: each domain-randomised driver beside the driver trained on the nominal terrain and the PI,
+    on the conditions neither saw in training, with the counts of cases in which each beats the PI."""
+    pairs = [(n.removesuffix(RANDOMIZED_SUFFIX), n) for n in results
+             if n.endswith(RANDOMIZED_SUFFIX) and n.removesuffix(RANDOMIZED_SUFFIX) in results]
+    if not pairs:
+        return []
+    lines = ["", "## Domain-randomised drivers on conditions they did not see", "",
+             "Each `-randomized` driver was trained with every episode on parameters drawn from its terrain's default "
+             "ranges (the Table 5.6 column above); the Table 5.5 soils lie inside that box but were never drawn as "
+             "such. Conditions: the Table 5.5 soils other than dry_sand_1 (≈ the nominal dry sand; one episode "
+             "each), 16 draws with every parameter outside the training ranges, and each unmodelled effect at its "
+             "library defaults on the nominal terrain (simulation). *Beats* as in the effects section: a higher "
+             "success rate, or the same and a lower tracking RMSE. Cells: success, tracking RMSE.", "",
+             "| driver | condition | nominal-trained | randomised | PI | nominal-trained beats PI | randomised beats PI |",
+             "|---|---|---|---|---|---|---|"]
+    kinds = ("soil", "outside", "effect")
+    tot = {k: {"nominal": 0, "randomized": 0, "n": 0} for k in kinds}
+    for base, rnd in pairs:
+        nominal_cases = dict(held_out_cases(results[base]))
+        for cond, res in held_out_cases(results[rnd]):
+            other = nominal_cases.get(cond)
+            c_r = compare_methods(res)["classical"]
+            c_n = compare_methods(other)["classical"] if other else None
+            lines.append(f"| {rnd} | {cond} | {_cell_of(other, 'learned')} | {_cell_of(res, 'learned')} | "
+                         f"{_cell_of(res, 'classical')} | {'-' if c_n is None else _yes_no(c_n['beats'])} | "
+                         f"{_yes_no(c_r['beats'])} |")
+            t = tot[cond.split()[0]]
+            t["n"] += 1
+            t["randomized"] += c_r["beats"]
+            t["nominal"] += bool(c_n and c_n["beats"])
+    n = sum(t["n"] for t in tot.values())
+    r = sum(t["randomized"] for t in tot.values())
+    b = sum(t["nominal"] for t in tot.values())
+    label = {"soil": "held-out soils", "outside": "outside the ranges", "effect": "under the effects"}
+    parts = "; ".join(f"{label[k]}: {tot[k]['randomized']} vs {tot[k]['nominal']} of {tot[k]['n']}" for k in kinds
+                      if tot[k]["n"])
+    lines += ["", f"**Summary:** over {n} driver × condition cases, the randomised drivers beat the PI in "
+              f"**{r} of {n}**, the drivers trained on the nominal terrain in {b} of {n} (randomised vs "
+              f"nominal-trained: {parts})."]
+    return lines
+
+
+def _cell_of(res, m):
+    s = None if res is None else res["methods"].get(m, {}).get("summary")
+    return "-" if s is None else f"{s['success_rate']:.0%} {_f(s['tracking_rmse'], 3)}"
 
 
 def _cell(res):
@@ -362,8 +445,8 @@ def _f(x, nd):
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description="Evaluate the shipped drivers against the baselines (train/results.*).")
     ap.add_argument("drivers", nargs="*", help="only these drivers (<EnvName>-<terrain>, e.g. JTurn-v0-asphalt)")
-    ap.add_argument("--effects-only", action="store_true",
-                    help="run only the 'effects' section (one unmodelled effect at a time, library defaults) and "
-                         "keep the other sections of train/results.json")
+    ap.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS),
+                    help="run only these sections and keep the others of train/results.json (default: all)")
+    ap.add_argument("--effects-only", action="store_true", help="the same as --sections effects")
     a = ap.parse_args()
-    main(a.drivers or None, effects_only=a.effects_only)
+    main(a.drivers or None, sections=("effects",) if a.effects_only else tuple(a.sections))

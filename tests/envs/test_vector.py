@@ -79,6 +79,24 @@ def test_disabled_autoreset_and_reset_mask():
     assert (obs[mask, t_idx] == 0).all() and (obs[~mask, t_idx] == 1).all()
 
 
+@pytest.mark.parametrize("terrain", ["dry_sand", "asphalt"])
+def test_outside_ranges_draw_every_parameter_outside_the_training_ranges(terrain):
+    from trackenv.envs.randomization import default_ranges, outside_ranges
+    from trackenv.params import load_params
+
+    p = load_params(terrain)
+    inside, outside = default_ranges(p), outside_ranges(p)
+    assert set(outside) == set(inside)
+    venv = TrackVectorEnv("go_stop", 8, terrain=terrain, domain_randomization=outside, autoreset_mode="disabled")
+    _, info = venv.reset(seed=3)
+    for k, (lo, hi) in inside.items():
+        v = info["params"][k]
+        assert v.shape == (8,) and len(set(v.tolist())) == 8
+        assert ((v >= hi * (1 - 1e-6)) | (v <= lo * (1 + 1e-6))).all(), (k, v, lo, hi)
+        a, b = outside[k]
+        assert ((v >= a * (1 - 1e-6)) & (v <= b * (1 + 1e-6))).all(), (k, v, a, b)
+
+
 def test_vector_seeding_and_randomisation():
     a = TrackVectorEnv("go_stop", 4, domain_randomization=True, autoreset_mode="next_step")
     b = TrackVectorEnv("go_stop", 4, domain_randomization=True, autoreset_mode="next_step")

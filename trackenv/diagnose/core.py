@@ -496,7 +496,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         else:
             F = len(folds) + 1
             m = max(3, int(np.ceil(search_points / F)))
-            k = 2 if (c.is_effect and any(x.name == RECALIBRATE for x in cands)) else 1  # branches fitted
+            k = 2 if (c.is_effect and c.name != SENSOR and any(x.name == RECALIBRATE for x in cands)) else 1
             planned += k * (len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters))
     bar = tqdm(total=planned, desc="diagnose", unit="sim", disable=not progress, leave=False)
     fits: dict[str, CandidateFit] = {}
@@ -511,13 +511,16 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             rc = fits[RECALIBRATE]
             c = c.standing_on(rc.candidate)
             below = [[dict(fd.params), dict(rc.candidate.anchor)] for fd in [*rc.folds, rc.full]]
-            on_control, on_base = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
-                                                polish_iters=polish_iters, jacobian=jacobian,
-                                                progress=bar.update, below=below, each_branch=True)
-            fits[c.name] = on_control
+            # the instruments-only candidate competes only as fitted on the control: its base branch is
+            # sampled by the shared design but not refined
+            branches = (0,) if c.name == SENSOR else (0, 1)
+            branch_fits = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
+                                        polish_iters=polish_iters, jacobian=jacobian, progress=bar.update,
+                                        below=below, each_branch=branches)
+            fits[c.name] = branch_fits[0]
             t_fit[c.name] = time.perf_counter() - t0  # one search for both fits
-            if c.name != SENSOR:  # the instruments-only candidate competes only as fitted on the control
-                fits[c.name + ON_BASE] = on_base
+            if len(branch_fits) > 1:
+                fits[c.name + ON_BASE] = branch_fits[1]
                 t_fit[c.name + ON_BASE] = t_fit[c.name]
         else:
             fits[c.name] = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,

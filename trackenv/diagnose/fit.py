@@ -228,7 +228,7 @@ def _losses(tests, pred):
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
                   min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None,
                   jacobian: str = "secant", below: list | None = None,
-                  each_branch: bool = False) -> CandidateFit | list[CandidateFit]:
+                  each_branch: bool | tuple[int, ...] = False) -> CandidateFit | list[CandidateFit]:
     """Fit ``cand`` on every fold and on all the data (see the module docstring).
 
     ``below``: where ``cand`` stands on another candidate (:attr:`.candidates.Candidate.on`), per fit (the
@@ -239,7 +239,8 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     held-out prediction therefore uses nothing fitted on its held-out data.
 
     ``each_branch``: instead, search and polish every branch separately (sharing the global design) and
-    return one :class:`CandidateFit` per branch, in the order of the sets in ``below``.
+    return one :class:`CandidateFit` per branch, in the order of the sets in ``below``; a tuple of branch
+    indices refines and returns only those branches (the global design still spans all of them).
     """
     tests = sim.tests
     n = len(tests)
@@ -258,7 +259,13 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     def branch_of(o):
         return n_branch - 1 if o < 0 else o // F
 
-    branches = list(range(n_branch)) if (each_branch and below is not None) else [None]
+    if isinstance(each_branch, tuple):
+        if below is None or not each_branch or any(not 0 <= b < n_branch for b in each_branch):
+            raise ValueError(f"{cand.name}: each_branch={each_branch!r} needs 'below' and branch indices in "
+                             f"0..{n_branch - 1}")
+        branches = list(each_branch)
+    else:
+        branches = list(range(n_branch)) if (each_branch and below is not None) else [None]
 
     def keep_branch(b):
         return None if b is None else (lambda o: branch_of(o) == b)

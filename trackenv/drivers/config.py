@@ -27,6 +27,9 @@ any other key       a keyword of the algorithm's constructor (``learning_rate``,
                     ``n_epochs``, ``buffer_size``, ``train_freq``, ...), checked against its signature
 ==================  ==============================================================================
 
+A file may begin with ``extends: <file>`` (e.g. ``extends: ppo.yaml``): the sections of that config
+(in ``configs/train``) are read first and this file's keys override them, nested dicts key by key.
+
 An unknown key, task, terrain or algorithm raises :class:`~trackenv.params.ConfigError` naming the
 file and key **before** any environment is built or any training starts.
 """
@@ -91,9 +94,13 @@ def algo_class(algo: str):
     return {"ppo": sb3.PPO, "sac": sb3.SAC}[resolve_algo(algo)]
 
 
-def driver_name(task: str, terrain: str) -> str:
-    """``<EnvName>-<terrain>``, e.g. ``JTurn-v0-dry_sand`` (the shipped zip's stem)."""
-    return f"{task_class(task).env_name}-{terrain}"
+RANDOMIZED_SUFFIX = "-randomized"
+
+
+def driver_name(task: str, terrain: str, randomized: bool = False) -> str:
+    """``<EnvName>-<terrain>``, e.g. ``JTurn-v0-dry_sand`` (the shipped zip's stem); a driver trained with
+    domain randomisation ends in ``-randomized`` (``JTurn-v0-dry_sand-randomized``)."""
+    return f"{task_class(task).env_name}-{terrain}" + (RANDOMIZED_SUFFIX if randomized else "")
 
 
 def repo_relative(path: str | Path | None) -> str | None:
@@ -140,10 +147,47 @@ def config_path(algo: str, config: str | Path | None = None) -> Path:
     return Path(config) if config is not None else CONFIG_DIR / f"{resolve_algo(algo)}.yaml"
 
 
+def _read_yaml(path: Path):
+    if not path.is_file():
+        raise ConfigError(f"training config not found: {path}")
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8")), str(path)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+
+
+def _extend(raw: dict, where: str, seen: tuple = ()) -> dict:
+    """Resolve ``extends: <file>`` (a config of the same layout, relative to ``configs/train``): its sections
+    first, then this file's, merged section by section (nested dicts such as ``policy_kwargs`` key by key)."""
+    base_name = raw.pop("extends", None)
+    if base_name is None:
+        return raw
+    if not isinstance(base_name, str):
+        raise ConfigError(f"{where}: 'extends' must name a config file, got {base_name!r}")
+    path = CONFIG_DIR / base_name
+    if str(path) in seen:
+        raise ConfigError(f"{where}: 'extends' loops back to {path}")
+    base, base_where = _read_yaml(path)
+    if not isinstance(base, dict):
+        raise ConfigError(f"{base_where}: must be a mapping of sections")
+    base = _extend(base, base_where, (*seen, str(path)))
+    out = copy.deepcopy(base)
+    for section, body in raw.items():
+        if isinstance(body, dict) and isinstance(out.get(section), dict):
+            merged = dict(out[section])
+            for k, v in body.items():
+                merged[k] = {**merged[k], **v} if isinstance(v, dict) and isinstance(merged.get(k), dict) else v
+            out[section] = merged
+        else:
+            out[section] = body
+    return out
+
+
 def load_config(algo: str, task: str, terrain: str | None = None, config: str | Path | dict | None = None) -> dict:
     """The validated hyperparameters for ``algo`` on ``task`` (and ``terrain``), RL Zoo style.
 
-    ``config``: a YAML path (default ``configs/train/<algo>.yaml``) or a ready dict of the same layout.
+    ``config``: a YAML path (default ``configs/train/<algo>.yaml``) or a ready dict of the same layout; a
+    top-level ``extends: <file>`` starts from another config of ``configs/train`` (see :func:`_extend`).
     Raises :class:`ConfigError` naming the file and the key on any unknown key or bad value.
     """
     algo = resolve_algo(algo)
@@ -151,16 +195,10 @@ def load_config(algo: str, task: str, terrain: str | None = None, config: str | 
     if isinstance(config, dict):
         raw, where = copy.deepcopy(config), "config"
     else:
-        path = config_path(algo, config)
-        if not path.is_file():
-            raise ConfigError(f"training config not found: {path}")
-        try:
-            raw = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: invalid YAML: {exc}") from None
-        where = str(path)
+        raw, where = _read_yaml(config_path(algo, config))
     if not isinstance(raw, dict):
         raise ConfigError(f"{where}: must be a mapping of sections (default, <EnvName>, <EnvName>-<terrain>)")
+    raw = _extend(raw, where)
     allowed = set(META_KEYS) | _allowed_algo_keys(algo)
     names = set(ENV_NAME.values())
     sections = {"default"} | names | {f"{n}-{t}" for n in names for t in _terrain_ids()}

@@ -132,8 +132,12 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
           seed: int = 0, timesteps: int | None = None, out_dir: str | Path | None = None,
           run_dir: str | Path | None = None, resume: bool = False,
           progress_bar: bool = True, tensorboard: bool = True, verbose: int = 0, threads: int = 1,
-          command: str | None = None) -> TrainResult:
+          command: str | None = None, randomize: bool = False) -> TrainResult:
     """Train a driver and save ``<out_dir>/<EnvName>-<terrain>.zip`` plus its ``.json`` record.
+
+    ``randomize``: domain-randomised training, every episode on parameters drawn from the default ranges
+    of ``terrain`` (:mod:`trackenv.envs.randomization`; sets ``env_kwargs.domain_randomization`` unless
+    the config sets it); the driver is named ``<EnvName>-<terrain>-randomized``.
 
     Everything is validated (task, terrain, algorithm, config keys and values) before an environment
     is built. ``timesteps`` overrides the config's ``n_timesteps``; ``resume`` continues from the
@@ -150,7 +154,10 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
             raise ConfigError(f"timesteps must be a positive integer, got {timesteps!r}")
         cfg["n_timesteps"] = int(timesteps)
     check_budget(cfg, algo, where="--timesteps" if timesteps is not None else "n_timesteps")
-    name = driver_name(task, terrain)
+    if randomize:
+        cfg["env_kwargs"] = {**cfg["env_kwargs"]}
+        cfg["env_kwargs"].setdefault("domain_randomization", True)
+    name = driver_name(task, terrain, randomized=randomize)
     out = Path(out_dir) if out_dir is not None else ROOT / "out" / "train" / f"{name}-{algo}-s{seed}"
     run = Path(run_dir) if run_dir is not None else out
     ckpt = latest_checkpoint(run) if resume else None
@@ -163,7 +170,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     torch.set_num_threads(int(threads))
     out.mkdir(parents=True, exist_ok=True)
     run.mkdir(parents=True, exist_ok=True)
-    driver_meta = {"task": task, "terrain": terrain, "residual": cfg["residual"]}
+    driver_meta = {"task": task, "terrain": terrain, "residual": cfg["residual"],
+                   "domain_randomization": cfg["env_kwargs"].get("domain_randomization", False)}
     if cfg["residual"] > 0:
         from ..envs.controllers import load_gains  # noqa: PLC0415
 
@@ -209,7 +217,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         "resumed_from": repo_relative(ckpt) if ckpt else None, "driver_meta": driver_meta,
         "final_mean_return": float(np.mean([e["r"] for e in ep])) if ep else None,
         "final_success_rate": float(np.mean([e.get("is_success", 0.0) for e in ep])) if ep else None,
-        "command": command or f"trackenv train {env_name} --terrain {terrain} --algo {algo} --seed {seed}",
+        "command": command or (f"trackenv train {env_name} --terrain {terrain} --algo {algo} --seed {seed}"
+                               + (" --randomize" if randomize else "")),
         "versions": _versions(), "model_bytes": model_path.stat().st_size,
     }
     info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)

@@ -23,6 +23,20 @@ mass +-10 %. The yaw inertia is not rescaled with the mass.
 
 Only constant-model internal resistance is randomised by default; with the viscous model
 (``internal_resistance="viscous"``) ``internal.viscous`` is scaled x [0.94, 1.5] instead.
+
+:func:`outside_ranges` gives ranges that lie wholly **outside** the default ones, every parameter at
+once (robustness tests of drivers trained on the defaults), each on its harder side where one is
+clear, the SI values:
+
+====================  =========================  ============================================
+parameter             deformable ground          hard ground (relative to the loaded terrain)
+====================  =========================  ============================================
+terrain.cohesion      3.04 - 4.5 kPa             (not randomised)
+terrain.friction_angle 18 - 23 deg (less grip)   x [0.7, 0.85]
+terrain.shear_modulus 0.0508 - 0.075 m (softer)  x [1.45, 2.0]
+internal.constant     1.17 - 1.45 N m            x [1.5, 1.85]
+vehicle.mass          +10 % to +20 %             +10 % to +20 %
+====================  =========================  ============================================
 """
 
 from __future__ import annotations
@@ -97,6 +111,35 @@ def default_ranges(params: Params) -> dict[str, tuple[float, float]]:
         out["internal.viscous"] = (0.94 * nominal, 1.5 * nominal)
     m = float(params.vehicle.mass)
     out["vehicle.mass"] = (_MASS_REL[0] * m, _MASS_REL[1] * m)
+    return out
+
+
+_SAND_OUTSIDE = {
+    "terrain.cohesion": (3040.0, 4500.0),
+    "terrain.friction_angle": (math.radians(18.0), math.radians(23.0)),
+    "terrain.shear_modulus": (0.0508, 0.075),
+    "internal.constant": (1.17, 1.45),
+}
+_HARD_OUTSIDE_REL = {
+    "terrain.friction_angle": (0.7, 0.85),
+    "terrain.shear_modulus": (1.45, 2.0),
+    "internal.constant": (1.5, 1.85),
+}
+_MASS_OUTSIDE_REL = (1.1, 1.2)
+
+
+def outside_ranges(params: Params) -> dict[str, tuple[float, float]]:
+    """Ranges wholly outside :func:`default_ranges` for ``params``'s terrain, for every parameter it
+    randomises (table in the module docstring): a draw from them is outside the training box in every
+    coordinate. Constant-model internal resistance only (a viscous model raises ``ConfigError``)."""
+    if float(params.internal.viscous) > 0.0 and float(params.internal.constant) == 0.0:
+        raise ConfigError("outside_ranges: defined for the constant internal-resistance model only")
+    if float(params.terrain.deformable) > 0.5:
+        out = dict(_SAND_OUTSIDE)
+    else:
+        out = {k: (a * float(_leaf(params, k)), b * float(_leaf(params, k))) for k, (a, b) in _HARD_OUTSIDE_REL.items()}
+    m = float(params.vehicle.mass)
+    out["vehicle.mass"] = (_MASS_OUTSIDE_REL[0] * m, _MASS_OUTSIDE_REL[1] * m)
     return out
 
 
