@@ -93,6 +93,7 @@ def curve_figure(rows: list[dict], title: str, path: Path) -> Path:
     for ax, x, xlabel in ((axes[0], steps, "environment steps"), (axes[1], wall, "wall time [s]")):
         ax.plot(x, ret, color="tab:blue")
         ax.set_xlabel(xlabel)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))  # 140000 steps as 1.4 x 1e5
         ax.set_ylabel("mean episode return (last 100)", color="tab:blue")
         tw = ax.twinx()
         tw.plot(x, succ, color="tab:green", ls="--")
