@@ -34,7 +34,7 @@ def test_shipped_configs_validate():
                 cfg = drivers.load_config(algo, task, terrain)
                 assert cfg["n_timesteps"] > 0 and cfg["policy"] == "MlpPolicy"
     plain = drivers.load_config("ppo", "go_stop", "asphalt", drivers.ROOT / "configs" / "train" / "ppo_plain.yaml")
-    assert plain["residual"] == 0.0 and plain["policy_kwargs"]["log_std_init"] == -2.2
+    assert plain["residual"] == 0.0 and plain["policy_kwargs"]["log_std_init"] == -2.2 and plain["guide"] == 0.5
 
 
 def test_unknown_config_key_names_file_and_key(tmp_path):
@@ -226,7 +226,7 @@ def test_sac_trains_saves_and_loads(tmp_path):
 def test_residual_driver_with_zero_policy_is_the_classical_controller():
     """The residual wrapper applies classical(obs) + r * action: a zero action reproduces the PI episode."""
     gains = controllers.load_gains("go_stop", "dry_sand")
-    venv, _ = drivers.make_vec_env("go_stop", "dry_sand", 2, {}, seed=1000, residual={"scale": 0.3, "gains": gains})
+    venv, _, _ = drivers.make_vec_env("go_stop", "dry_sand", 2, {}, seed=1000, residual={"scale": 0.3, "gains": gains})
     obs = venv.reset()
     rewards = []
     for _ in range(30):
@@ -249,3 +249,87 @@ def test_records_name_repository_files_relative_to_the_repository(tmp_path):
     assert repo_relative(CONFIG_DIR / "ppo.yaml") == "configs/train/ppo.yaml"
     assert repo_relative(tmp_path / "x.zip") == str(tmp_path / "x.zip")  # outside the repository: as given
     assert repo_relative(None) is None
+
+
+def test_guided_plain_driver_fades_the_classical_part_and_saves_a_plain_policy(tmp_path):
+    """``guide: f``: the classical weight falls linearly 1 -> 0 over f x n_timesteps; the saved driver is plain
+    (no classical part at inference); a guide on a residual driver is a config error naming the key."""
+    from trackenv.drivers.wrappers import GuideSchedule
+
+    gains = controllers.load_gains("go_stop", "dry_sand")
+    venv, _, guided = drivers.make_vec_env("go_stop", "dry_sand", 2, {}, seed=1000,
+                                           residual={"scale": 1.0, "gains": gains, "classical_weight": 1.0})
+    sched = GuideSchedule(guided, 1000)
+    assert [sched.weight(s) for s in (0, 250, 1000, 5000)] == [1.0, 0.75, 0.0, 0.0]
+    # weight 0 and a zero action: zero voltages, the vehicle does not move; weight 1: the PI drives
+    for w, moves in ((0.0, False), (1.0, True)):
+        guided.classical_weight = w
+        obs0 = venv.reset()
+        for _ in range(10):
+            obs, *_ = venv.step(np.zeros((2, 2), np.float32))
+        dist = obs0[0, 1] - obs[0, 1]  # distance_to_mark shrinks as it drives
+        assert (dist > 0.05) == moves, (w, dist)
+    venv.close()
+    with pytest.raises(ConfigError, match="guide"):
+        drivers.load_config("ppo", "go_stop", config={"default": {"n_timesteps": 64, "residual": 0.3, "guide": 0.5}})
+    cfg = {"default": {"n_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1, "n_timesteps": 64, "guide": 0.5,
+                       "policy_kwargs": {"net_arch": [8]}, "env_kwargs": {"max_time": 0.5}}}
+    res = drivers.train("go_stop", "dry_sand", "ppo", config=cfg, out_dir=tmp_path, progress_bar=False,
+                        tensorboard=False)
+    meta = res.info["driver_meta"]
+    assert meta["residual"] == 0.0 and meta["guide"]["fraction"] == 0.5
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = drivers.load_policy(res.model_path, "go_stop", "dry_sand")
+    assert drivers.Learned(model).ctrl is None  # acts alone
+
+
+def test_speed_error_penalty_makes_standing_still_costly():
+    """``speed_error_weight``: the reward drops by w_v (e_v / 0.2 m/s)^2 on the speed error of the next
+    observation; a task without a speed error observation (zero-radius turn) is a config error."""
+    rewards = {}
+    for w in (0.0, 2.0):
+        venv, _, _ = drivers.make_vec_env("j_turn", "dry_sand", 2, {}, seed=1000, speed_error_weight=w)
+        venv.reset()
+        obs, r, _, _ = venv.step(np.zeros((2, 2), np.float32))  # zero voltages: the vehicle stays put
+        rewards[w] = (r, obs)
+        venv.close()
+    (r0, obs0), (r2, _) = rewards[0.0], rewards[2.0]
+    e_v = obs0[:, 0]  # speed_error: the reference speed, as the vehicle does not move
+    assert np.all(e_v > 0.1)
+    np.testing.assert_allclose(r0 - r2, 2.0 * (e_v / 0.2) ** 2, rtol=1e-4)
+    with pytest.raises(ConfigError, match="speed_error"):
+        drivers.train("zero_radius_turn", "asphalt", "ppo", out_dir=None, tensorboard=False, progress_bar=False,
+                      config={"default": {"n_envs": 4, "n_steps": 8, "n_timesteps": 64, "speed_error_weight": 1.0}})
+
+
+def test_imitation_warm_start_clones_the_classical_controller():
+    """``imitate: n``: the policy's mean action is fitted to n steps of the PI's episodes, after which the
+    plain policy alone reproduces the PI's voltages on the states of a fresh PI episode (mean squared error
+    in units of the voltage limit, against an untrained policy's), and the environment is left plain; with
+    a guide it is a config error."""
+    from stable_baselines3 import PPO
+
+    from trackenv.drivers.train import imitate_classical
+
+    gains = controllers.load_gains("go_stop", "dry_sand")
+    venv, _, guided = drivers.make_vec_env("go_stop", "dry_sand", 8, {}, seed=1000,
+                                           residual={"scale": 1.0, "gains": gains, "classical_weight": 0.0})
+    kw = {"n_steps": 16, "batch_size": 64, "seed": 0, "device": "cpu", "policy_kwargs": {"net_arch": [64, 64]}}
+    model, untrained = PPO("MlpPolicy", venv, **kw), PPO("MlpPolicy", venv, **kw)
+    res = imitate_classical(model, venv, guided, steps=1600, epochs=30)
+    assert res["samples"] == 1600 and guided.classical_weight == 0.0
+    guided.classical_weight = 1.0  # a fresh PI episode: its states and the PI's actions
+    obs = venv.reset()
+    states, actions = [], []
+    for _ in range(60):
+        states.append(obs)
+        obs, *_ = venv.step(np.zeros((8, 2), np.float32))
+        actions.append(np.clip(guided.last_classical, -1.0, 1.0))
+    venv.close()
+    x, y = np.concatenate(states), np.concatenate(actions)
+    mse = {name: float(np.mean((np.clip(m.predict(x, deterministic=True)[0], -1, 1) - y) ** 2))
+           for name, m in (("cloned", model), ("untrained", untrained))}
+    assert res["action_mse"] < 1e-2 and mse["cloned"] < 5e-3 and mse["cloned"] < 0.05 * mse["untrained"], (res, mse)
+    with pytest.raises(ConfigError, match="imitate"):
+        drivers.load_config("ppo", "go_stop", config={"default": {"n_timesteps": 64, "guide": 0.5, "imitate": 100}})

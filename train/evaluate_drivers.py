@@ -4,9 +4,11 @@
     python train/evaluate_drivers.py --effects-only     # only the "effects" section (the rest kept)
     python train/evaluate_drivers.py --sections outside # only the named sections (the rest kept)
     python train/evaluate_drivers.py JTurn-v0-asphalt   # only the named driver(s)
+    python train/evaluate_drivers.py plain/JTurn-v0-asphalt   # a plain driver (train/drivers/plain/)
 
-For every driver <EnvName>-<terrain>.zip (trained on the nominal terrain) and
-<EnvName>-<terrain>-randomized.zip (trained with the terrain's default domain-randomisation ranges):
+For every driver <EnvName>-<terrain>.zip (a residual driver trained on the nominal terrain),
+<EnvName>-<terrain>-randomized.zip (trained with the terrain's default domain-randomisation ranges) and
+plain/<EnvName>-<terrain>.zip (a plain policy, no classical part, trained on the nominal terrain):
 
 - nominal: ``trackenv evaluate`` on its terrain (learned vs open loop vs classical, 4 seeded episodes;
   the nominal terrain is deterministic, so they agree);
@@ -59,6 +61,7 @@ CLOSE = 0.05  # |learned RMSE / PI RMSE - 1| below this: a close call (the learn
 
 
 SECTIONS = ("nominal", "soils", "table_5_6", "outside", "effects")
+PLAIN = "plain"  # plain drivers: train/drivers/plain/<EnvName>-<terrain>.zip, results key "plain/<name>"
 
 
 def main(only=None, sections=SECTIONS):
@@ -70,15 +73,18 @@ def main(only=None, sections=SECTIONS):
     if out_json.is_file():
         results = json.loads(out_json.read_text())
     partial = set(sections) != set(SECTIONS)
-    runs = [(task, terrain, randomized) for randomized in (False, True) for task in ENV_NAME
+    runs = [(task, terrain, kind) for kind in ("residual", "randomized", PLAIN) for task in ENV_NAME
             for terrain in ("dry_sand", "asphalt")]
-    for task, terrain, randomized in runs:
+    for task, terrain, kind in runs:
+        randomized = kind == "randomized"
         name = driver_name(task, terrain, randomized)
+        if kind == PLAIN:
+            name = f"{PLAIN}/{name}"
         if only and name not in only:
             continue
         zp = drivers / f"{name}.zip"
         if not zp.is_file():
-            if not randomized:
+            if kind == "residual":
                 print(f"missing {zp}", flush=True)
             continue
         if partial and name not in results:
@@ -91,7 +97,7 @@ def main(only=None, sections=SECTIONS):
         rec = dict(results[name]) if partial else {}
         rec["train"] = json.loads((drivers / f"{name}.json").read_text())
         if "nominal" in sections:
-            figures = ROOT / "train" / "figures" / ("randomized" if randomized else "")
+            figures = ROOT / "train" / "figures" / {"residual": "", "randomized": "randomized", PLAIN: PLAIN}[kind]
             rec["nominal"] = evaluate(task, terrain, model, episodes=4, seed=1000, figures=figures)
         if "soils" in sections:
             rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
@@ -362,11 +368,15 @@ def write_md(results):
               "| driver | nominal | " + " | ".join(SOILS) + " | Table 5.6 ranges (16 ep.) | outside the ranges (16 ep.) |",
               "|---|---|" + "---|" * len(SOILS) + "---|---|"]
     for name, rec in results.items():
+        if name.startswith(PLAIN + "/"):
+            continue
         cells = [_cell(rec["nominal"])] + [_cell(rec["soils"][s]) for s in SOILS] + [_cell(rec["table_5_6"])]
         cells.append(_cell(rec["outside"]) if "outside" in rec else "-")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines += randomized_md(results)
-    lines += effects_md({k: v for k, v in results.items() if not k.endswith(RANDOMIZED_SUFFIX)})
+    lines += plain_md(results)
+    lines += effects_md({k: v for k, v in results.items()
+                         if not k.endswith(RANDOMIZED_SUFFIX) and not k.startswith(PLAIN + "/")})
     (ROOT / "train" / "results.md").write_text("\n".join(lines) + "\n")
 
 
@@ -422,6 +432,56 @@ def randomized_md(results):
     lines += ["", f"**Summary:** over {n} driver × condition cases, the randomised drivers beat the PI in "
               f"**{r} of {n}**, the drivers trained on the nominal terrain in {b} of {n} (randomised vs "
               f"nominal-trained: {parts})."]
+    return lines
+
+
+def plain_md(results):
+    """Markdown: each plain driver beside the residual driver of the same task and terrain and both baselines,
+    on the nominal terrain, then on the conditions neither saw in training (held-out soils, draws outside
+    the ranges, the effects), with the counts of cases in which each beats the PI."""
+    pairs = [(n.removeprefix(PLAIN + "/"), n) for n in results
+             if n.startswith(PLAIN + "/") and n.removeprefix(PLAIN + "/") in results]
+    if not pairs:
+        return []
+    lines = ["", "## Plain drivers (no classical part) against the residual drivers", "",
+             "Each `plain/` driver's action is the two voltages alone (trained with a guided curriculum, "
+             "`configs/train/ppo_plain.yaml`); the residual driver of the same task and terrain adds its action to "
+             "the PI's. Nominal terrain, 4 episodes; cells: success, tracking RMSE. *Beats* as in the effects "
+             "section: a higher success rate, or the same and a lower tracking RMSE.", "",
+             "| task, terrain | plain | residual | PI | open loop | plain beats PI | plain beats open loop |",
+             "|---|---|---|---|---|---|---|"]
+    won = 0
+    for base, plain in pairs:
+        res_p, res_r = results[plain]["nominal"], results[base]["nominal"]
+        c = compare_methods(res_p)
+        won += c["classical"]["beats"] and c["open_loop"]["beats"]
+        lines.append(f"| {base} | {_cell_of(res_p, 'learned')} | {_cell_of(res_r, 'learned')} | "
+                     f"{_cell_of(res_p, 'classical')} | {_cell_of(res_p, 'open_loop')} | "
+                     f"{_yes_no(c['classical']['beats'])} | {_yes_no(c['open_loop']['beats'])} |")
+    missing = [n for n in results if not n.startswith(PLAIN + "/") and not n.endswith(RANDOMIZED_SUFFIX)
+               and f"{PLAIN}/{n}" not in results]
+    lines += ["", f"On the nominal terrain the plain drivers beat both baselines in **{won} of {len(pairs)}** "
+              "task × terrain pairs." + (f" No plain driver has learned yet: {', '.join(missing)} (train/README.md, "
+                                         "\"Plain PPO\")." if missing else ""), "",
+              "On conditions not seen in training (as in the previous section; the effects that do not act on "
+              "the terrain are skipped):", "",
+              "| driver | condition | residual | plain | PI | residual beats PI | plain beats PI |",
+              "|---|---|---|---|---|---|---|"]
+    n = r = p = 0
+    for base, plain in pairs:
+        residual_cases = dict(held_out_cases(results[base]))
+        for cond, res in held_out_cases(results[plain]):
+            other = residual_cases.get(cond)
+            c_p = compare_methods(res)["classical"]
+            c_r = compare_methods(other)["classical"] if other else None
+            lines.append(f"| {plain} | {cond} | {_cell_of(other, 'learned')} | {_cell_of(res, 'learned')} | "
+                         f"{_cell_of(res, 'classical')} | {'-' if c_r is None else _yes_no(c_r['beats'])} | "
+                         f"{_yes_no(c_p['beats'])} |")
+            n += 1
+            p += c_p["beats"]
+            r += bool(c_r and c_r["beats"])
+    lines += ["", f"**Summary:** over {n} driver × condition cases, the plain drivers beat the PI in **{p} of {n}**, "
+              f"the residual drivers in {r} of {n}."]
     return lines
 
 

@@ -18,10 +18,21 @@ residual            0 (default): the policy's action is the voltages; r > 0: a *
                     voltages are the classical PI controller's (trackenv.envs.controllers.ClassicalController,
                     gains of configs/train/classical_gains.yaml) plus r x the policy's action, all in
                     units of the vehicle's voltage limit (the gains and r are stored in the zip; see train/README.md)
+guide               0 (default) or a fraction f in (0, 1], plain drivers only (``residual: 0``): a guided
+                    curriculum, the classical PI controller's voltages times a weight falling linearly
+                    from 1 to 0 over the first f x n_timesteps steps are added to the policy's
+                    (:class:`~trackenv.drivers.wrappers.GuideSchedule`); the saved driver acts alone
+imitate             0 (default) or a number of environment steps, plain drivers only: a behaviour-cloning
+                    warm start, the policy's mean action and value fitted to that many steps of the classical
+                    controller's episodes before training (:func:`~trackenv.drivers.train.imitate_classical`)
 error_weight        w >= 0 (default 0): training reward shaping, r - w (e / s)^2 with e the task's
                     primary tracking error (``Task.primary_error``, the evaluated RMSE's) read from the next
                     observation and s its kernel scale; the environment's reward kernels saturate for large
                     errors, the RMSE does not. VecMonitor (and the reported returns) see the unshaped reward
+speed_error_weight  w_v >= 0 (default 0): a second shaping term, r - w_v (e_v / s_v)^2 on the ``speed_error``
+                    observation (the tasks that observe one: go-stop, J-turn, lane change; s_v its kernel
+                    scale, 0.2 m/s). It makes standing still costly for a plain policy, for which the
+                    cross-track penalty alone rewards not driving at all (train/README.md, "Plain PPO")
 any other key       a keyword of the algorithm's constructor (``learning_rate``, ``n_steps``,
                     ``batch_size``, ``gamma``, ``gae_lambda``, ``ent_coef``, ``clip_range``,
                     ``n_epochs``, ``buffer_size``, ``train_freq``, ...), checked against its signature
@@ -60,7 +71,7 @@ ENV_NAME = ENV_NAMES  # task id -> env name
 TERRAINS = ("dry_sand", "asphalt")  # the shipped drivers' terrains; any configs/terrain id trains
 ALGOS = ("ppo", "sac")
 META_KEYS = ("n_envs", "n_timesteps", "policy", "policy_kwargs", "env_kwargs", "checkpoint_freq", "residual",
-             "error_weight")
+             "error_weight", "guide", "speed_error_weight", "imitate")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -215,7 +226,12 @@ def load_config(algo: str, task: str, terrain: str | None = None, config: str | 
                 merged[k] = {**merged[k], **v}
             else:
                 merged[k] = copy.deepcopy(v)
-    return _validate_values(merged, f"{where} [{' + '.join(k for k in order if k in raw)}]")
+    label = f"{where} [{' + '.join(k for k in order if k in raw)}]"
+    cfg = _validate_values(merged, label)
+    if cfg["speed_error_weight"] > 0 and "speed_error" not in task_class(task).obs_names:
+        raise ConfigError(f"{label}: 'speed_error_weight' needs a speed_error observation, which "
+                          f"{env_name} does not have")
+    return cfg
 
 
 def _validate_values(cfg: dict, where: str) -> dict:
@@ -230,11 +246,33 @@ def _validate_values(cfg: dict, where: str) -> dict:
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not (0.0 <= float(r) <= 2.0):
         raise ConfigError(f"{where}: 'residual' must be a number in [0, 2] (0: plain policy), got {r!r}")
     cfg["residual"] = float(r)
+    cfg.setdefault("guide", 0.0)
+    g = cfg["guide"]
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not (0.0 <= float(g) <= 1.0):
+        raise ConfigError(f"{where}: 'guide' must be a fraction of n_timesteps in [0, 1] (0: off), got {g!r}")
+    cfg["guide"] = float(g)
+    if cfg["guide"] > 0 and cfg["residual"] > 0:
+        raise ConfigError(f"{where}: 'guide' is a plain driver's curriculum and needs 'residual: 0', "
+                          f"got residual {cfg['residual']!r}")
     cfg.setdefault("error_weight", 0.0)
     w = cfg["error_weight"]
     if isinstance(w, bool) or not isinstance(w, (int, float)) or not (0.0 <= float(w) < 1e3):
         raise ConfigError(f"{where}: 'error_weight' must be a non-negative number, got {w!r}")
     cfg["error_weight"] = float(w)
+    cfg.setdefault("imitate", 0)
+    m = cfg["imitate"]
+    if isinstance(m, float) and m.is_integer():
+        m = int(m)
+    if isinstance(m, bool) or not isinstance(m, int) or m < 0:
+        raise ConfigError(f"{where}: 'imitate' must be a number of environment steps >= 0 (0: off), got {m!r}")
+    cfg["imitate"] = m
+    if m > 0 and (cfg["residual"] > 0 or cfg["guide"] > 0):
+        raise ConfigError(f"{where}: 'imitate' is a plain driver's warm start and needs 'residual: 0' and 'guide: 0'")
+    cfg.setdefault("speed_error_weight", 0.0)
+    w = cfg["speed_error_weight"]
+    if isinstance(w, bool) or not isinstance(w, (int, float)) or not (0.0 <= float(w) < 1e3):
+        raise ConfigError(f"{where}: 'speed_error_weight' must be a non-negative number, got {w!r}")
+    cfg["speed_error_weight"] = float(w)
     if "n_timesteps" not in cfg:
         raise ConfigError(f"{where}: missing key 'n_timesteps'")
     for k in ("n_envs", "n_timesteps", "checkpoint_freq"):

@@ -75,8 +75,10 @@ def read_curve(path: Path) -> list[dict]:
     return pd.read_csv(path).to_dict("records")
 
 
-def curve_figure(rows: list[dict], title: str, path: Path) -> Path:
-    """Return and success rate against steps (left) and wall time (right); PNG."""
+def curve_figure(rows: list[dict], title: str, path: Path, guide_steps: int | None = None) -> Path:
+    """Return and success rate against steps (left) and wall time (right); PNG. ``guide_steps``: a guided
+    plain driver's curriculum length (the step at which the classical part's weight reaches 0), marked by
+    a dotted line."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
@@ -99,5 +101,9 @@ def curve_figure(rows: list[dict], title: str, path: Path) -> Path:
         tw.plot(x, succ, color="tab:green", ls="--")
         tw.set_ylim(-0.05, 1.05)
         tw.set_ylabel("success rate (last 100)", color="tab:green")
+        if guide_steps and len(rows) > 1:
+            xg = guide_steps if x is steps else float(np.interp(guide_steps, steps, wall))
+            ax.axvline(xg, color="0.4", ls=":", lw=1)
+            ax.text(xg, 0.02, " PI weight 0", transform=ax.get_xaxis_transform(), fontsize=7, color="0.3")
     fig.suptitle(f"{title} (SIMULATED training; env share of wall time {100 * share:.0f} %)", fontsize=9)
     return _save(fig, path)

@@ -51,17 +51,19 @@ from .config import (
     resolve_task,
     resolve_terrain,
 )
-from .curves import LearningCurve, curve_figure, read_curve, write_curve
+from .curves import LearningCurve, _BaseCallback, curve_figure, read_curve, write_curve
 from .policy import load_policy
-from .wrappers import ErrorPenalty, ResidualVecEnv, StepTimer
+from .wrappers import ErrorPenalty, GuideSchedule, ResidualVecEnv, StepTimer
 
 
 def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None = None, seed: int | None = None,
-                 residual: dict | None = None, error_weight: float = 0.0):
+                 residual: dict | None = None, error_weight: float = 0.0, speed_error_weight: float = 0.0):
     """The SB3 training env: ``SB3VecEnv`` (normalised actions) in a step timer and ``VecMonitor``;
-    with ``residual`` (``{"scale": r, "gains": {...}}``) the policy's action is added to the classical
-    controller's (:class:`~trackenv.drivers.wrappers.ResidualVecEnv`); with ``error_weight`` > 0 the
-    reward is shaped on the task's primary tracking error (:class:`~trackenv.drivers.wrappers.ErrorPenalty`)."""
+    with ``residual`` (``{"scale": r, "gains": {...}}``, optionally ``"classical_weight"``) the policy's
+    action is added to the classical controller's (:class:`~trackenv.drivers.wrappers.ResidualVecEnv`);
+    with ``error_weight`` > 0 the reward is shaped on the task's primary tracking error, with
+    ``speed_error_weight`` > 0 also on its speed error (:class:`~trackenv.drivers.wrappers.ErrorPenalty`).
+    Returns the env, the step timer and the ``ResidualVecEnv`` (None without ``residual``)."""
     from stable_baselines3.common.vec_env import VecMonitor  # noqa: PLC0415
 
     from ..envs.vector import SB3VecEnv  # noqa: PLC0415
@@ -69,14 +71,81 @@ def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None =
     venv = SB3VecEnv(task=resolve_task(task), num_envs=int(n_envs), normalize_action=True, terrain=terrain,
                      **(env_kwargs or {}))
     timer = StepTimer(venv)
-    inner = ResidualVecEnv(timer, residual["scale"], residual["gains"]) if residual else timer
+    inner = (ResidualVecEnv(timer, residual["scale"], residual["gains"], residual.get("classical_weight", 1.0))
+             if residual else timer)
     mon = VecMonitor(inner, info_keywords=("is_success", "tracking_rmse"))
     if error_weight > 0:
         pe = task_class(task).primary_error  # its TaskEval.error (the RMSE metric) and its kernel scale
         mon = ErrorPenalty(mon, venv.venv.obs_names.index(pe.obs_name), pe.scale, error_weight)
+    if speed_error_weight > 0:
+        cls = task_class(task)
+        if "speed_error" not in venv.venv.obs_names:
+            raise ConfigError(f"speed_error_weight: task {cls.name} has no speed_error observation "
+                              f"(observations: {', '.join(venv.venv.obs_names)})")
+        mon = ErrorPenalty(mon, venv.venv.obs_names.index("speed_error"), cls.kernel_scales["speed_error"],
+                           speed_error_weight)
     if seed is not None:
         mon.seed(int(seed))
-    return mon, timer
+    return mon, timer, (inner if residual else None)
+
+
+def imitate_classical(model, venv, guided: ResidualVecEnv, steps: int, epochs: int = 20) -> dict:
+    """Behaviour-cloning warm start of a plain policy: drive ``steps`` environment steps with the classical
+    controller alone (``guided.classical_weight`` 1, zero policy action), then fit the policy's mean action
+    to the controller's (clipped to [-1, 1]) and its value to the discounted (shaped) returns of those
+    episodes, by Adam on the mean squared errors. The environment is left plain (weight 0). Returns the
+    final losses."""
+    import torch  # noqa: PLC0415
+
+    n = venv.num_envs
+    guided.classical_weight = 1.0
+    obs = venv.reset()
+    xs, ys, rs, ds = [], [], [], []
+    zero = np.zeros((n, 2), np.float32)
+    for _ in range(-(-int(steps) // n)):
+        xs.append(obs)
+        obs, r, done, _ = venv.step(zero)
+        ys.append(np.clip(guided.last_classical, -1.0, 1.0))
+        rs.append(r)
+        ds.append(done)
+    guided.classical_weight = 0.0
+    g, rets = np.zeros(n), []
+    for r, d in zip(reversed(rs), reversed(ds), strict=True):  # episodes cut by the collection end: no bootstrap
+        g = r + model.gamma * g * (1.0 - d)
+        rets.append(g.copy())
+    x = torch.as_tensor(np.concatenate(xs), dtype=torch.float32)
+    y = torch.as_tensor(np.concatenate(ys), dtype=torch.float32)
+    ret = torch.as_tensor(np.concatenate(rets[::-1]), dtype=torch.float32)
+    scale = float(ret.std()) + 1e-6
+    pol = model.policy
+    opt = torch.optim.Adam(pol.parameters(), lr=1e-3)
+    gen = torch.Generator().manual_seed(int(model.seed or 0))
+    for _ in range(int(epochs)):
+        for idx in torch.randperm(len(x), generator=gen).split(1024):
+            mean = pol.get_distribution(x[idx]).distribution.mean
+            v = pol.predict_values(x[idx]).squeeze(-1)
+            a_loss = torch.mean((mean - y[idx]) ** 2)
+            v_loss = torch.mean(((v - ret[idx]) / scale) ** 2)
+            opt.zero_grad()
+            (a_loss + v_loss).backward()
+            opt.step()
+    return {"samples": len(x), "action_mse": float(a_loss.detach()), "value_mse_scaled": float(v_loss.detach())}
+
+
+class _GuideCallback(_BaseCallback):
+    """Sets a :class:`~trackenv.drivers.wrappers.GuideSchedule`'s weight from SB3's step count before
+    every environment step."""
+
+    def __init__(self, schedule: GuideSchedule):
+        super().__init__()
+        self.schedule = schedule
+
+    def _on_training_start(self) -> None:
+        self.schedule(self.model.num_timesteps)
+
+    def _on_step(self) -> bool:
+        self.schedule(self.model.num_timesteps)
+        return True
 
 
 @dataclass
@@ -172,12 +241,25 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     run.mkdir(parents=True, exist_ok=True)
     driver_meta = {"task": task, "terrain": terrain, "residual": cfg["residual"],
                    "domain_randomization": cfg["env_kwargs"].get("domain_randomization", False)}
-    if cfg["residual"] > 0:
+    if cfg["residual"] > 0 or cfg["guide"] > 0 or cfg["imitate"] > 0:
         from ..envs.controllers import load_gains  # noqa: PLC0415
 
-        driver_meta["gains"] = load_gains(task, terrain)
-    residual = {"scale": cfg["residual"], "gains": driver_meta["gains"]} if cfg["residual"] > 0 else None
-    venv, timer = make_vec_env(task, terrain, cfg["n_envs"], cfg["env_kwargs"], seed, residual, cfg["error_weight"])
+        gains = load_gains(task, terrain)
+    residual = None
+    if cfg["residual"] > 0:
+        driver_meta["gains"] = gains
+        residual = {"scale": cfg["residual"], "gains": gains}
+    elif cfg["guide"] > 0:  # a plain driver's curriculum: the classical part fades out during training
+        driver_meta["guide"] = {"fraction": cfg["guide"], "gains": gains}
+        residual = {"scale": 1.0, "gains": gains, "classical_weight": 1.0}
+    elif cfg["imitate"] > 0:  # a plain driver's warm start from the classical controller's episodes
+        driver_meta["imitate"] = {"steps": cfg["imitate"], "gains": gains}
+        residual = {"scale": 1.0, "gains": gains, "classical_weight": 0.0}
+    venv, timer, guided = make_vec_env(task, terrain, cfg["n_envs"], cfg["env_kwargs"], seed, residual,
+                                       cfg["error_weight"], cfg["speed_error_weight"])
+    callbacks = []
+    if cfg["guide"] > 0:
+        callbacks.append(_GuideCallback(GuideSchedule(guided, round(cfg["guide"] * cfg["n_timesteps"]))))
     tb, progress_bar = _optional_outputs(run, tensorboard, progress_bar)
     previous = {}
     if ckpt is not None:
@@ -189,6 +271,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     else:
         model = algo_class(algo)(cfg["policy"], venv, policy_kwargs=policy_kwargs(cfg), seed=int(seed), device="cpu",
                                  tensorboard_log=tb, verbose=verbose, **algo_kwargs(cfg))
+    if cfg["imitate"] > 0 and ckpt is None:
+        driver_meta["imitate"]["result"] = imitate_classical(model, venv, guided, cfg["imitate"])
     done_before = int(model.num_timesteps)
     remaining = max(0, cfg["n_timesteps"] - done_before)
     checkpoints = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
@@ -199,7 +283,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
                                   float(previous.get("env_step_seconds", 0.0))),
                           rows=read_curve(run_curve) if (ckpt is not None and run_curve.is_file()) else None)
     t0 = time.perf_counter()
-    model.learn(total_timesteps=remaining, callback=[checkpoints, curve], progress_bar=progress_bar,
+    model.learn(total_timesteps=remaining, callback=[*callbacks, checkpoints, curve], progress_bar=progress_bar,
                 tb_log_name=name, reset_num_timesteps=ckpt is None)
     wall = time.perf_counter() - t0
     model_path = out / f"{name}.zip"
@@ -224,7 +308,9 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)
     write_curve(curve.rows, run_curve)
     curve_csv = write_curve(curve.rows, out / f"{name}.curve.csv")
-    curve_png = curve_figure(curve.rows, f"{name} ({algo}, seed {seed})", out / f"{name}.curve.png")
+    guide_steps = round(cfg["guide"] * cfg["n_timesteps"]) if cfg["guide"] > 0 else None
+    curve_png = curve_figure(curve.rows, f"{name} ({algo}{', guided' if guide_steps else ''}, seed {seed})",
+                             out / f"{name}.curve.png", guide_steps=guide_steps)
     info["curve_csv"], info["curve_png"] = repo_relative(curve_csv), repo_relative(curve_png)
     info_path = out / f"{name}.json"
     info_path.write_text(json.dumps(info, indent=2) + "\n")

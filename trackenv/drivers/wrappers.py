@@ -4,7 +4,8 @@ Stable-Baselines3 ``VecEnvWrapper`` s around :class:`~trackenv.envs.vector.SB3Ve
 same-step autoreset is the jitted core's, :func:`trackenv.envs.core.step_autoreset`):
 
 - :class:`StepTimer`: wall time spent stepping and resetting the environment [s];
-- :class:`ResidualVecEnv`: the applied action is the PI controller's plus a scaled policy action;
+- :class:`ResidualVecEnv`: the applied action is the PI controller's (times a weight, which
+  :class:`GuideSchedule` lowers to 0 for a plain driver's curriculum) plus a scaled policy action;
 - :class:`ErrorPenalty`: training reward shaping on the task's primary tracking error.
 
 For evaluation, :class:`EpisodeRecorder` wraps a :class:`~trackenv.envs.vector.TrackVectorEnv` without
@@ -52,14 +53,15 @@ class StepTimer(_VecEnvWrapper):
 
 
 class ResidualVecEnv(_VecEnvWrapper):
-    """Residual driver: applied action = clip(classical(obs) + scale * policy action, -1, 1) (units of the
-    vehicle's voltage limit).
+    """Residual driver: applied action = clip(w * classical(obs) + scale * policy action, -1, 1) (units of the
+    vehicle's voltage limit), ``w`` = ``classical_weight`` (1 for a residual driver; a plain driver's
+    guided curriculum lowers it from 1 to 0, :class:`GuideSchedule`).
 
     The classical PI controller (:class:`trackenv.envs.controllers.ClassicalController`) runs on the same
     observations, one integrator per environment, reset when an episode ends.
     """
 
-    def __init__(self, venv, scale: float, gains: dict):
+    def __init__(self, venv, scale: float, gains: dict, classical_weight: float = 1.0):
         super().__init__(venv)
         from ..envs.controllers import classical_for  # noqa: PLC0415
 
@@ -69,6 +71,7 @@ class ResidualVecEnv(_VecEnvWrapper):
         self.params = base.venv.params
         self.scale = float(scale)
         self.ctrl = classical_for(self.params, gains)
+        self.classical_weight = float(classical_weight)
         self._obs = None
 
     def reset(self):
@@ -77,7 +80,8 @@ class ResidualVecEnv(_VecEnvWrapper):
         return self._obs
 
     def step_async(self, actions):
-        a = self.ctrl(self._obs) + self.scale * np.asarray(actions, np.float32)
+        self.last_classical = self.ctrl(self._obs)
+        a = self.classical_weight * self.last_classical + self.scale * np.asarray(actions, np.float32)
         self.venv.step_async(np.clip(a, -1.0, 1.0).astype(np.float32))
 
     def step_wait(self):
@@ -86,6 +90,26 @@ class ResidualVecEnv(_VecEnvWrapper):
             self.ctrl.reset_rows(dones)
         self._obs = obs
         return obs, rew, dones, infos
+
+
+class GuideSchedule:
+    """A plain driver's guided curriculum: the classical controller's weight in a :class:`ResidualVecEnv`
+    (policy scale 1) falls linearly from 1 at step 0 to 0 at ``guide_steps``, and stays 0 after.
+
+    Early episodes then run close to the PI controller's, so the policy sees stops and successes from the
+    start, and it takes the whole action over gradually; the saved policy acts alone (plain). Called with
+    the number of environment steps trained so far (SB3's ``num_timesteps``; a resumed run continues).
+    """
+
+    def __init__(self, env: ResidualVecEnv, guide_steps: int):
+        self.env, self.guide_steps = env, int(guide_steps)
+
+    def weight(self, steps: int) -> float:
+        return max(0.0, 1.0 - float(steps) / self.guide_steps) if self.guide_steps > 0 else 0.0
+
+    def __call__(self, steps: int) -> float:
+        self.env.classical_weight = self.weight(steps)
+        return self.env.classical_weight
 
 
 class ErrorPenalty(_VecEnvWrapper):
