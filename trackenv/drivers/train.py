@@ -272,7 +272,9 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         model = algo_class(algo)(cfg["policy"], venv, policy_kwargs=policy_kwargs(cfg), seed=int(seed), device="cpu",
                                  tensorboard_log=tb, verbose=verbose, **algo_kwargs(cfg))
     if cfg["imitate"] > 0 and ckpt is None:
+        t_bc = time.perf_counter()
         driver_meta["imitate"]["result"] = imitate_classical(model, venv, guided, cfg["imitate"])
+        driver_meta["imitate"]["result"]["seconds"] = time.perf_counter() - t_bc  # counted in train_seconds
     done_before = int(model.num_timesteps)
     remaining = max(0, cfg["n_timesteps"] - done_before)
     checkpoints = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
@@ -285,7 +287,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     t0 = time.perf_counter()
     model.learn(total_timesteps=remaining, callback=[*callbacks, checkpoints, curve], progress_bar=progress_bar,
                 tb_log_name=name, reset_num_timesteps=ckpt is None)
-    wall = time.perf_counter() - t0
+    wall = time.perf_counter() - t0 + driver_meta.get("imitate", {}).get("result", {}).get("seconds", 0.0)
     model_path = out / f"{name}.zip"
     model.trackenv_driver = driver_meta  # saved in the zip's data; read back by trackenv.drivers.policy.Learned
     model.save(str(model_path))
