@@ -392,6 +392,23 @@ def held_out_cases(rec):
     return out
 
 
+def held_out_rows(results, pairs):
+    """For each (reference, candidate) pair of driver names and each condition of the candidate's record that
+    its training did not see (:func:`held_out_cases`): the kind of condition (soil, outside, effect), the
+    Markdown row (candidate | condition | reference | candidate | PI | reference beats PI | candidate beats
+    PI; cells: success, tracking RMSE) and whether the reference and the candidate beat the PI."""
+    for ref, cand in pairs:
+        ref_cases = dict(held_out_cases(results[ref]))
+        for cond, res in held_out_cases(results[cand]):
+            other = ref_cases.get(cond)
+            c_cand = compare_methods(res)["classical"]
+            c_ref = compare_methods(other)["classical"] if other else None
+            row = (f"| {cand} | {cond} | {_cell_of(other, 'learned')} | {_cell_of(res, 'learned')} | "
+                   f"{_cell_of(res, 'classical')} | {'-' if c_ref is None else _yes_no(c_ref['beats'])} | "
+                   f"{_yes_no(c_cand['beats'])} |")
+            yield cond.split()[0], row, bool(c_ref and c_ref["beats"]), bool(c_cand["beats"])
+
+
 def randomized_md(results):
     """Markdown: each domain-randomised driver beside the driver trained on the nominal terrain and the PI,
     on the conditions neither saw in training, with the counts of cases in which each beats the PI."""
@@ -410,19 +427,12 @@ def randomized_md(results):
              "|---|---|---|---|---|---|---|"]
     kinds = ("soil", "outside", "effect")
     tot = {k: {"nominal": 0, "randomized": 0, "n": 0} for k in kinds}
-    for base, rnd in pairs:
-        nominal_cases = dict(held_out_cases(results[base]))
-        for cond, res in held_out_cases(results[rnd]):
-            other = nominal_cases.get(cond)
-            c_r = compare_methods(res)["classical"]
-            c_n = compare_methods(other)["classical"] if other else None
-            lines.append(f"| {rnd} | {cond} | {_cell_of(other, 'learned')} | {_cell_of(res, 'learned')} | "
-                         f"{_cell_of(res, 'classical')} | {'-' if c_n is None else _yes_no(c_n['beats'])} | "
-                         f"{_yes_no(c_r['beats'])} |")
-            t = tot[cond.split()[0]]
-            t["n"] += 1
-            t["randomized"] += c_r["beats"]
-            t["nominal"] += bool(c_n and c_n["beats"])
+    for kind, row, nominal_beats, randomized_beats in held_out_rows(results, pairs):
+        lines.append(row)
+        t = tot[kind]
+        t["n"] += 1
+        t["randomized"] += randomized_beats
+        t["nominal"] += nominal_beats
     n = sum(t["n"] for t in tot.values())
     r = sum(t["randomized"] for t in tot.values())
     b = sum(t["nominal"] for t in tot.values())
@@ -468,18 +478,11 @@ def plain_md(results):
               "| driver | condition | residual | plain | PI | residual beats PI | plain beats PI |",
               "|---|---|---|---|---|---|---|"]
     n = r = p = 0
-    for base, plain in pairs:
-        residual_cases = dict(held_out_cases(results[base]))
-        for cond, res in held_out_cases(results[plain]):
-            other = residual_cases.get(cond)
-            c_p = compare_methods(res)["classical"]
-            c_r = compare_methods(other)["classical"] if other else None
-            lines.append(f"| {plain} | {cond} | {_cell_of(other, 'learned')} | {_cell_of(res, 'learned')} | "
-                         f"{_cell_of(res, 'classical')} | {'-' if c_r is None else _yes_no(c_r['beats'])} | "
-                         f"{_yes_no(c_p['beats'])} |")
-            n += 1
-            p += c_p["beats"]
-            r += bool(c_r and c_r["beats"])
+    for _, row, residual_beats, plain_beats in held_out_rows(results, pairs):
+        lines.append(row)
+        n += 1
+        p += plain_beats
+        r += residual_beats
     lines += ["", f"**Summary:** over {n} driver × condition cases, the plain drivers beat the PI in **{p} of {n}**, "
               f"the residual drivers in {r} of {n}."]
     return lines

@@ -234,6 +234,18 @@ def load_config(algo: str, task: str, terrain: str | None = None, config: str | 
     return cfg
 
 
+def _number(cfg: dict, key: str, lower: float, upper: float, where: str, expected: str,
+            upper_open: bool = False) -> None:
+    """``cfg[key]`` (default 0) as a float in [lower, upper] (or [lower, upper) with ``upper_open``), in place;
+    a ``ConfigError`` saying it must be ``expected`` otherwise."""
+    v = cfg.setdefault(key, 0.0)
+    ok = (not isinstance(v, bool) and isinstance(v, (int, float))
+          and lower <= float(v) and (float(v) < upper if upper_open else float(v) <= upper))
+    if not ok:
+        raise ConfigError(f"{where}: '{key}' must be {expected}, got {v!r}")
+    cfg[key] = float(v)
+
+
 def _validate_values(cfg: dict, where: str) -> dict:
     cfg = dict(cfg)
     cfg.setdefault("policy", "MlpPolicy")
@@ -241,24 +253,12 @@ def _validate_values(cfg: dict, where: str) -> dict:
     cfg.setdefault("checkpoint_freq", 100_000)
     cfg.setdefault("policy_kwargs", {})
     cfg.setdefault("env_kwargs", {})
-    cfg.setdefault("residual", 0.0)
-    r = cfg["residual"]
-    if isinstance(r, bool) or not isinstance(r, (int, float)) or not (0.0 <= float(r) <= 2.0):
-        raise ConfigError(f"{where}: 'residual' must be a number in [0, 2] (0: plain policy), got {r!r}")
-    cfg["residual"] = float(r)
-    cfg.setdefault("guide", 0.0)
-    g = cfg["guide"]
-    if isinstance(g, bool) or not isinstance(g, (int, float)) or not (0.0 <= float(g) <= 1.0):
-        raise ConfigError(f"{where}: 'guide' must be a fraction of n_timesteps in [0, 1] (0: off), got {g!r}")
-    cfg["guide"] = float(g)
+    _number(cfg, "residual", 0.0, 2.0, where, "a number in [0, 2] (0: plain policy)")
+    _number(cfg, "guide", 0.0, 1.0, where, "a fraction of n_timesteps in [0, 1] (0: off)")
     if cfg["guide"] > 0 and cfg["residual"] > 0:
         raise ConfigError(f"{where}: 'guide' is a plain driver's curriculum and needs 'residual: 0', "
                           f"got residual {cfg['residual']!r}")
-    cfg.setdefault("error_weight", 0.0)
-    w = cfg["error_weight"]
-    if isinstance(w, bool) or not isinstance(w, (int, float)) or not (0.0 <= float(w) < 1e3):
-        raise ConfigError(f"{where}: 'error_weight' must be a non-negative number, got {w!r}")
-    cfg["error_weight"] = float(w)
+    _number(cfg, "error_weight", 0.0, 1e3, where, "a non-negative number", upper_open=True)
     cfg.setdefault("imitate", 0)
     m = cfg["imitate"]
     if isinstance(m, float) and m.is_integer():
@@ -268,11 +268,7 @@ def _validate_values(cfg: dict, where: str) -> dict:
     cfg["imitate"] = m
     if m > 0 and (cfg["residual"] > 0 or cfg["guide"] > 0):
         raise ConfigError(f"{where}: 'imitate' is a plain driver's warm start and needs 'residual: 0' and 'guide: 0'")
-    cfg.setdefault("speed_error_weight", 0.0)
-    w = cfg["speed_error_weight"]
-    if isinstance(w, bool) or not isinstance(w, (int, float)) or not (0.0 <= float(w) < 1e3):
-        raise ConfigError(f"{where}: 'speed_error_weight' must be a non-negative number, got {w!r}")
-    cfg["speed_error_weight"] = float(w)
+    _number(cfg, "speed_error_weight", 0.0, 1e3, where, "a non-negative number", upper_open=True)
     if "n_timesteps" not in cfg:
         raise ConfigError(f"{where}: missing key 'n_timesteps'")
     for k in ("n_envs", "n_timesteps", "checkpoint_freq"):

@@ -257,9 +257,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         residual = {"scale": 1.0, "gains": gains, "classical_weight": 0.0}
     venv, timer, guided = make_vec_env(task, terrain, cfg["n_envs"], cfg["env_kwargs"], seed, residual,
                                        cfg["error_weight"], cfg["speed_error_weight"])
-    callbacks = []
-    if cfg["guide"] > 0:
-        callbacks.append(_GuideCallback(GuideSchedule(guided, round(cfg["guide"] * cfg["n_timesteps"]))))
+    guide_steps = round(cfg["guide"] * cfg["n_timesteps"]) if cfg["guide"] > 0 else None
+    callbacks = [_GuideCallback(GuideSchedule(guided, guide_steps))] if guide_steps else []
     tb, progress_bar = _optional_outputs(run, tensorboard, progress_bar)
     previous = {}
     if ckpt is not None:
@@ -271,10 +270,11 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     else:
         model = algo_class(algo)(cfg["policy"], venv, policy_kwargs=policy_kwargs(cfg), seed=int(seed), device="cpu",
                                  tensorboard_log=tb, verbose=verbose, **algo_kwargs(cfg))
+    imitate_seconds = 0.0  # counted in train_seconds
     if cfg["imitate"] > 0 and ckpt is None:
         t_bc = time.perf_counter()
         driver_meta["imitate"]["result"] = imitate_classical(model, venv, guided, cfg["imitate"])
-        driver_meta["imitate"]["result"]["seconds"] = time.perf_counter() - t_bc  # counted in train_seconds
+        imitate_seconds = driver_meta["imitate"]["result"]["seconds"] = time.perf_counter() - t_bc
     done_before = int(model.num_timesteps)
     remaining = max(0, cfg["n_timesteps"] - done_before)
     checkpoints = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
@@ -287,7 +287,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     t0 = time.perf_counter()
     model.learn(total_timesteps=remaining, callback=[*callbacks, checkpoints, curve], progress_bar=progress_bar,
                 tb_log_name=name, reset_num_timesteps=ckpt is None)
-    wall = time.perf_counter() - t0 + driver_meta.get("imitate", {}).get("result", {}).get("seconds", 0.0)
+    wall = time.perf_counter() - t0 + imitate_seconds
     model_path = out / f"{name}.zip"
     model.trackenv_driver = driver_meta  # saved in the zip's data; read back by trackenv.drivers.policy.Learned
     model.save(str(model_path))
@@ -310,7 +310,6 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)
     write_curve(curve.rows, run_curve)
     curve_csv = write_curve(curve.rows, out / f"{name}.curve.csv")
-    guide_steps = round(cfg["guide"] * cfg["n_timesteps"]) if cfg["guide"] > 0 else None
     curve_png = curve_figure(curve.rows, f"{name} ({algo}{', guided' if guide_steps else ''}, seed {seed})",
                              out / f"{name}.curve.png", guide_steps=guide_steps)
     info["curve_csv"], info["curve_png"] = repo_relative(curve_csv), repo_relative(curve_png)
