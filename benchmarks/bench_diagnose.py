@@ -1,10 +1,13 @@
 """Wall time of a 6-test gap diagnosis (``trackenv.diagnose``) on the synthetic field twin.
 
-    python benchmarks/bench_diagnose.py [--substep 0.001] [--tests a,b,...]
+    python benchmarks/bench_diagnose.py [--substep 0.001] [--tests a,b,...] [--compare-bucket-fill 0.75]
 
 Runs the diagnosis unchanged (its own fit substep unless ``--substep`` is given) on six tests of
 ``data/field/thesis`` (the four go-stops and J-turns and both lane changes), without figures, and
-prints the wall time, the verdict, and the host devices it had.
+prints the wall time, the verdict, and the host devices it had. With ``--compare-bucket-fill F`` it then
+runs the same diagnosis again in the same process with ``trackenv.diagnose.batch.BUCKET_FILL = F`` (the
+rule that decides which tests share a padded batch) and prints both times and the ratio. The default
+rule runs first, so that any warm-up the second run gets favours the alternative.
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ from pathlib import Path
 
 import trackenv  # noqa: F401  (host devices are set up at import)
 from trackenv import parallel
-from trackenv.diagnose import diagnose
+from trackenv.diagnose import batch, diagnose
+from trackenv.diagnose.data import load_tests
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = ["go_stop_dry_sand", "go_stop_asphalt", "j_turn_dry_sand", "j_turn_asphalt",
@@ -26,14 +30,23 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tests", default=",".join(TESTS))
     ap.add_argument("--substep", type=float, default=None)
+    ap.add_argument("--compare-bucket-fill", type=float, default=None,
+                    help="also run with this BUCKET_FILL, in the same process, and print the ratio")
     a = ap.parse_args()
     kw = {} if a.substep is None else {"substep": a.substep}
-    t0 = time.perf_counter()
-    d = diagnose(ROOT / "data/field/thesis", None, tests=a.tests.split(","), figures=False, progress=False, **kw)
-    wall = time.perf_counter() - t0
-    verdict = getattr(d, "verdict", None) or (d.get("verdict") if isinstance(d, dict) else None)
-    print(f"{len(a.tests.split(','))}-test diagnosis: {wall:.1f} s wall on {len(parallel.cpu_devices())} host device(s); "
-          f"verdict: {verdict if not isinstance(verdict, dict) else verdict.get('effect')}")
+    tests = a.tests.split(",")
+    fills = [batch.BUCKET_FILL] + ([] if a.compare_bucket_fill is None else [a.compare_bucket_fill])
+    walls = []
+    for fill in fills:
+        batch.BUCKET_FILL = fill
+        n_buckets = len(batch.make_buckets(load_tests(ROOT / "data/field/thesis", tests)[0]))
+        t0 = time.perf_counter()
+        d = diagnose(ROOT / "data/field/thesis", None, tests=tests, figures=False, progress=False, **kw)
+        walls.append(time.perf_counter() - t0)
+        print(f"{len(tests)}-test diagnosis (BUCKET_FILL {fill:g}: {n_buckets} buckets): {walls[-1]:.1f} s wall on "
+              f"{len(parallel.cpu_devices())} host device(s); verdict: {d.verdict.get('effect')}", flush=True)
+    if len(walls) == 2:
+        print(f"BUCKET_FILL {fills[1]:g} / {fills[0]:g} wall time: {walls[1] / walls[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -102,6 +102,29 @@ def test_candidate_anchors_reproduce_the_base_model():
                 assert np.all(np.abs(d[~window]) <= 0.25 * span), (cand.name, sig)
 
 
+def test_tests_of_different_lengths_share_a_padded_batch_with_the_same_predictions(monkeypatch):
+    """A 5 s test is padded into the batch of a 10 s one (``BUCKET_FILL`` = 0.5: one batch, the cheaper
+    layout), or given its own batch with a stricter rule; the base model's predictions at the logs' samples
+    are the same either way (float32 rounding, driven window)."""
+    from trackenv.diagnose import batch
+
+    tests, _ = load_tests(TWIN, ["go_stop_dry_sand", "lane_change_dry_sand"])
+    shared = batch.BatchSimulator(tests)
+    assert len(shared.buckets) == 1 and shared.buckets[0].n_steps * shared.buckets[0].dt == pytest.approx(10.0, abs=0.05)
+    monkeypatch.setattr(batch, "BUCKET_FILL", 0.75)
+    split = batch.BatchSimulator(tests)
+    assert sorted(b.n_steps * b.dt for b in split.buckets) == pytest.approx([5.0, 10.0], abs=0.05)
+    none = candidate_set()[-1]
+    a, _ = split.run(none, {})
+    b, _ = shared.run(none, {})
+    for j, t in enumerate(tests):
+        driven = np.abs(t.volts).max(axis=1) > 0.05
+        window = t.t <= t.t[driven].max() + 0.2
+        for sig in a[j]:
+            d = (a[j][sig][:, 0] - b[j][sig][:, 0])[window]
+            assert np.max(np.abs(d)) <= 1e-3 * t.span[sig] + 1e-5, (t.name, sig)
+
+
 def test_an_effect_on_the_control_contains_the_fitted_control():
     """An effect fitted on top of ``recalibrate_base`` (:meth:`Candidate.standing_on`) reproduces the control
     at its anchor, whatever the control's fitted factors: through the batched search (a simulated effect, the

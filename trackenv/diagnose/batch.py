@@ -2,8 +2,8 @@
 
 All the pairs of a candidate run as one batch with the vehicle index on the last axis (docs/model.md §6):
 vehicle ``j * S + s`` is test ``j`` with parameter set ``s``. Tests of similar length share a batch
-(``buckets``: padded to the longest; a test much shorter than the longest goes to its own bucket so
-that padding wastes at most half the work). Each test's voltages are resampled onto the batch's
+(``buckets``: padded to the longest; a test shorter than ``BUCKET_FILL`` = half the longest goes to its
+own bucket, so that padding wastes at most half a bucket's simulation). Each test's voltages are resampled onto the batch's
 common grid (step ≤ 10 ms and ≤ the log's smallest interval, so the log's own breakpoints are kept for
 logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample times by linear
 interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
@@ -31,6 +31,12 @@ from .candidates import Candidate
 from .data import TestData
 
 FIT_SUBSTEP = 0.001  # s: NRMSE ≤ 1.4 % against the tight reference (tests/test_convergence.py)
+# A test shares a bucket only with tests at most 1 / BUCKET_FILL times its length. Padding is cheaper than it
+# looks: per vehicle, a batch of a few hundred runs 1.5-2x faster than one of a hundred (README, Performance),
+# and each extra bucket costs one compiled program per candidate. Measured on the field twin's 6-test
+# diagnosis (benchmarks/bench_diagnose.py, one process, the split layout run first): the 5 s tests in
+# buckets of their own, 645 s; padded to the 10 s lane changes in one bucket, 477 s.
+BUCKET_FILL = 0.5
 
 
 @dataclass(frozen=True)
@@ -70,7 +76,7 @@ def make_buckets(tests: list[TestData], substep: float = FIT_SUBSTEP, pad_s: flo
         same_kind = bool(groups) and tests[groups[-1][0]].drive_kind == tests[j].drive_kind
         if pad_s is not None and same_kind:
             groups[-1].append(j)
-        elif same_kind and tests[j].duration >= 0.5 * tests[groups[-1][0]].duration:
+        elif same_kind and tests[j].duration >= BUCKET_FILL * tests[groups[-1][0]].duration:
             groups[-1].append(j)
         else:
             groups.append([j])
