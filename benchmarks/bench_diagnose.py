@@ -36,10 +36,11 @@ def main():
     kw = {} if a.substep is None else {"substep": a.substep}
     tests = a.tests.split(",")
     fills = [batch.BUCKET_FILL] + ([] if a.compare_bucket_fill is None else [a.compare_bucket_fill])
+    data, _ = load_tests(ROOT / "data/field/thesis", tests)  # read once, for the bucket counts only
     walls = []
     for fill in fills:
         batch.BUCKET_FILL = fill
-        n_buckets = len(batch.make_buckets(load_tests(ROOT / "data/field/thesis", tests)[0]))
+        n_buckets = len(batch.make_buckets(data))
         t0 = time.perf_counter()
         d = diagnose(ROOT / "data/field/thesis", None, tests=tests, figures=False, progress=False, **kw)
         walls.append(time.perf_counter() - t0)

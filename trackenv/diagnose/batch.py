@@ -2,8 +2,8 @@
 
 All the pairs of a candidate run as one batch with the vehicle index on the last axis (docs/model.md §6):
 vehicle ``j * S + s`` is test ``j`` with parameter set ``s``. Tests of similar length share a batch
-(``buckets``: padded to the longest; a test shorter than ``BUCKET_FILL`` = half the longest goes to its
-own bucket, so that padding wastes at most half a bucket's simulation). Each test's voltages are resampled onto the batch's
+(``buckets``: padded to the longest; a test shorter than ``BUCKET_FILL`` times the longest goes to its
+own bucket, which bounds the simulation that padding wastes). Each test's voltages are resampled onto the batch's
 common grid (step ≤ 10 ms and ≤ the log's smallest interval, so the log's own breakpoints are kept for
 logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample times by linear
 interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
