@@ -76,7 +76,7 @@ def main(argv=None):
     ap.add_argument("--substeps", type=float, nargs="*", default=None,
                     help=f"substeps [s] for the single-env table (default: {DEFAULT_SUBSTEP:g} and 0.001, 0.002, 0.005)")
     ap.add_argument("--vector-substep", type=float, default=DEFAULT_SUBSTEP)
-    ap.add_argument("--batching", nargs="*", default=["auto"], choices=["auto", "vmap", "native"])
+    ap.add_argument("--batching", nargs="*", default=["auto"], choices=["auto", "vmap", "native", "loop"])
     ap.add_argument("--seconds", type=float, default=3.0, help="timed seconds per measurement")
     ap.add_argument("--sync-dispatch", action="store_true",
                     help="set jax_cpu_enable_async_dispatch=False before JAX starts (see the module docstring)")

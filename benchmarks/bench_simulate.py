@@ -14,6 +14,9 @@ Prints Markdown tables for the README, every number from this one process run:
 - batches (vehicles on the last axis, docs/model.md §6) through ``te.simulate``, which splits large
   batches across the host devices (``trackenv.parallel``), and the same batch on one device;
 - GFLOP/s beside the machine's measured peak (a 2048^2 float32 matmul);
+- one trajectory again in a fresh process with ``TRACKENV_SMALL_LOOP_BYTES=0`` (XLA's small-loop
+  emission off, ``trackenv.parallel``), and the speed-up of the default over it (``--one`` prints only
+  the one-trajectory line, the form that process runs);
 - the two forms of the contact-point sums (``trackenv.physics.sums``: XLA's ``reduce`` and unrolled
   additions) per batch size, each compiled and timed in this process (``--sums`` prints only that table).
 """
@@ -21,8 +24,10 @@ Prints Markdown tables for the README, every number from this one process run:
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import re
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -131,6 +136,23 @@ def scipy_seconds(params, t_end: float) -> float:
     return wall
 
 
+def one_trajectory(params, repeat: int) -> float:
+    """Compile and time one 10 s go-stop at the default substep; print its line; return the wall time [s]."""
+    substeps = n_substeps(DT, DEFAULT_SUBSTEP)
+    n_steps = int(round(T_END / DT))
+    prof = go_stop_profile(None)
+    s0 = initial_state(params)
+    t0 = time.perf_counter()
+    comp = CORE_JIT.lower(params, prof, s0, n_steps=n_steps, dt=DT, substeps=substeps).compile()
+    compile_s = time.perf_counter() - t0
+    wall = timed(lambda: comp(params, prof, s0), repeat)
+    one_kernel = any("xla_cpu_small_call" in ln and "14]" in ln for ln in comp.as_text().splitlines())
+    loops = "substep loop as one kernel" if one_kernel else "substep loop as separate kernels"
+    print(f"one trajectory (10 s go-stop, dry sand; {loops}): compile {compile_s:.1f} s, wall {wall * 1e3:.1f} ms, "
+          f"{T_END / wall:.0f}x real time, {wall / (n_steps * substeps) * 1e6:.2f} us / substep", flush=True)
+    return wall
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="batches 64, 256 only")
@@ -140,7 +162,11 @@ def main(argv=None):
     ap.add_argument("--no-scipy", action="store_true")
     ap.add_argument("--sums", action="store_true", help="only the table of the two forms of the contact-point sums")
     ap.add_argument("--sum-batches", type=int, nargs="*", default=[1, 8, 16, 64, 128, 256, 1024])
+    ap.add_argument("--one", action="store_true", help="only the one-trajectory line (no scipy, no tables)")
     args = ap.parse_args(argv)
+    if args.one:
+        one_trajectory(te.load_params("dry_sand"), args.repeat)
+        return
     batches = args.batches if args.batches is not None else ((64, 256) if args.quick else (64, 256, 1024, 4096))
     params = te.load_params("dry_sand")
     substeps = n_substeps(DT, DEFAULT_SUBSTEP)
@@ -162,15 +188,13 @@ def main(argv=None):
         print(f"| {b} vehicle{'s' if b > 1 else ''} | {nf} | {fl / b:,.0f} | {us:.2f} | {us / b:.3f} | {gf:.2f} | {100 * gf / peak:.1f} |")
 
     # one trajectory, and scipy on the same log
-    n_steps = int(round(T_END / DT))
-    prof = go_stop_profile(None)
-    s0 = initial_state(params)
-    t0 = time.perf_counter()
-    comp = CORE_JIT.lower(params, prof, s0, n_steps=n_steps, dt=DT, substeps=substeps).compile()
-    compile_s = time.perf_counter() - t0
-    wall = timed(lambda: comp(params, prof, s0), args.repeat)
-    print(f"\none trajectory (10 s go-stop, dry sand): compile {compile_s:.1f} s, wall {wall * 1e3:.1f} ms, "
-          f"{T_END / wall:.0f}x real time, {wall / (n_steps * substeps) * 1e6:.2f} us / substep")
+    print()
+    wall = one_trajectory(params, args.repeat)
+    off = subprocess.run([sys.executable, __file__, "--one", "--repeat", str(args.repeat)], capture_output=True,
+                         text=True, check=True, env={**os.environ, "TRACKENV_SMALL_LOOP_BYTES": "0"}).stdout
+    wall_off = float(re.search(r"wall ([0-9.]+) ms", off).group(1)) / 1e3
+    print(f"the same without small loops as one kernel (TRACKENV_SMALL_LOOP_BYTES=0, a fresh process): wall "
+          f"{wall_off * 1e3:.1f} ms, {T_END / wall_off:.0f}x real time; the default is {wall_off / wall:.2f}x faster")
     if not args.no_scipy:
         err = numpy_model.check(params)
         sp = scipy_seconds(params, T_END)

@@ -71,3 +71,45 @@ def test_split_vector_env_matches_one_device(monkeypatch):
         else:
             np.testing.assert_allclose(out[2][0], out[10**9][0], rtol=1e-5, atol=1e-5)
             np.testing.assert_allclose(out[2][1], out[10**9][1], rtol=1e-5, atol=1e-5)
+
+
+def _simulate_script(out):
+    return ("import numpy as np, trackenv as te\n"
+            "rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [1.0, 16, 6], [1.5, 0, 0], [2.0, 0, 0]], float)\n"
+            "prof = te.VoltageProfile.from_arrays(rows[:, 0], rows[:, 1:])\n"
+            "tr = te.simulate(te.load_params('dry_sand'), prof, 2.0)\n"
+            f"np.savez({str(out)!r}, **{{k: np.asarray(v) for k, v in tr.channels.items()}})\n")
+
+
+def test_small_loops_are_one_kernel_and_change_nothing_but_speed(tmp_path):
+    """One vehicle's substep loop is emitted as one kernel (XLA's small-while-loop call) and a batch of 64
+    is not; the trajectory equals the one without the option (a fresh process with it switched off)."""
+    import subprocess
+    import sys
+
+    from trackenv.physics.model import initial_state
+    from trackenv.simulate import simulate_core
+
+    if "xla_cpu_small_while_loop_byte_threshold" not in os.environ.get("XLA_FLAGS", ""):
+        pytest.skip("small-loop option not set (XLA_FLAGS or TRACKENV_SMALL_LOOP_BYTES)")
+    params = te.load_params("dry_sand")
+
+    def hoisted(batch):
+        rows = np.array([[0, 0, 0], [1.0, 11.8, 11.8]], float)
+        v = rows[:, 1:] if batch is None else np.repeat(rows[:, 1:, None], batch, axis=2)
+        prof = te.VoltageProfile.from_arrays(rows[:, 0], v)
+        s0 = initial_state(params, () if batch is None else (batch,))
+        text = jax.jit(simulate_core, static_argnames=("n_steps", "dt", "substeps", "t0", "unroll")).lower(
+            params, prof, s0, n_steps=4, dt=0.05, substeps=100).compile().as_text()
+        return any("xla_cpu_small_call" in line and "14]" in line for line in text.splitlines())
+
+    assert hoisted(None)
+    assert not hoisted(64)
+    on, off = tmp_path / "on.npz", tmp_path / "off.npz"
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    for path, extra in ((on, {}), (off, {"TRACKENV_SMALL_LOOP_BYTES": "0"})):
+        subprocess.run([sys.executable, "-c", _simulate_script(path)], check=True, env={**env, **extra})
+    a, b = np.load(on), np.load(off)
+    assert np.abs(a["speed_ideal"]).max() > 0.3 and np.abs(a["yaw_rate"]).max() > 0.1  # it drove and turned
+    for k in ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "y"):
+        np.testing.assert_allclose(a[k], b[k], rtol=1e-5, atol=1e-6 * np.abs(b[k]).max(), err_msg=k)

@@ -6,9 +6,10 @@ Public API (see README):
     SimulationDiverged                   -- raised when a simulation goes non-finite
 """
 
-from .parallel import configure_host_devices
+from .parallel import configure_host_devices, configure_small_loops
 
 configure_host_devices()  # one XLA CPU device per core for split batches, before JAX starts (parallel.py)
+configure_small_loops()  # small loops (one vehicle's substeps) as one XLA kernel, before JAX starts (parallel.py)
 
 from .params import ConfigError, Params, list_terrains, list_vehicles, load_params, replace
 from .physics.model import State, initial_state
