@@ -146,8 +146,7 @@ def one_trajectory(params, repeat: int) -> float:
     comp = CORE_JIT.lower(params, prof, s0, n_steps=n_steps, dt=DT, substeps=substeps).compile()
     compile_s = time.perf_counter() - t0
     wall = timed(lambda: comp(params, prof, s0), repeat)
-    one_kernel = any("xla_cpu_small_call" in ln and "14]" in ln for ln in comp.as_text().splitlines())
-    loops = "substep loop as one kernel" if one_kernel else "substep loop as separate kernels"
+    loops = "substep loop as one kernel" if parallel.substep_loop_is_one_kernel(comp) else "substep loop as separate kernels"
     print(f"one trajectory (10 s go-stop, dry sand; {loops}): compile {compile_s:.1f} s, wall {wall * 1e3:.1f} ms, "
           f"{T_END / wall:.0f}x real time, {wall / (n_steps * substeps) * 1e6:.2f} us / substep", flush=True)
     return wall

@@ -104,10 +104,9 @@ SAND_TESTS = ["go_stop_dry_sand", "go_stop_2ms_dry_sand", "j_turn_dry_sand", "la
               "zero_radius_turn_dry_sand"]
 
 
-def gap_diagnoses(out: Path, budget: dict | None = None) -> list[str]:
+def gap_diagnoses(out: Path, budget: dict = DEMO_BUDGET) -> list[str]:
     """The demo's main job: diagnose the thesis's own gaps on the SYNTHETIC field twin (``budget``: the
-    search's ``rounds``, ``search_points`` and ``polish_iters``; default :data:`DEMO_BUDGET`)."""
-    budget = DEMO_BUDGET if budget is None else budget
+    search's ``rounds``, ``search_points`` and ``polish_iters``; ``{}``: the diagnosis's defaults)."""
     from .diagnose import diagnose
 
     twin = TWIN_DIR

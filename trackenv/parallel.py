@@ -32,6 +32,7 @@ library reduce (:mod:`trackenv.physics.sums`) that the pass does not take (READM
 from __future__ import annotations
 
 import os
+import re
 
 MIN_PER_DEVICE = 256  # vehicles per core below which a batch is not split (measured, README Performance)
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
@@ -46,19 +47,21 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def configure_host_devices() -> None:
-    """Expose one XLA CPU device per core (at most ``MAX_HOST_DEVICES``) if JAX has not started yet."""
+def _add_xla_flag(present: str, flag: str, env: str, default: int, unit: str, minimum: int) -> None:
+    """Append ``flag`` (formatted with n) to ``XLA_FLAGS``; n from the environment variable ``env`` (an
+    integer number of ``unit``), else ``default``. Nothing if ``XLA_FLAGS`` already holds ``present``, if
+    n < ``minimum`` or if JAX has started (the flags are read once, when its backends initialise)."""
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_force_host_platform_device_count" in flags:
+    if present in flags:
         return
-    want = os.environ.get("TRACKENV_HOST_DEVICES")
+    want = os.environ.get(env)
     try:
-        n = int(want) if want else min(_cores(), MAX_HOST_DEVICES)
+        n = int(want) if want else default
     except ValueError:
-        raise ValueError(f"TRACKENV_HOST_DEVICES must be an integer number of devices, got {want!r}") from None
-    if n <= 1 or _jax_started():
+        raise ValueError(f"{env} must be an integer number of {unit}, got {want!r}") from None
+    if n < minimum or _jax_started():
         return
-    os.environ["XLA_FLAGS"] = (flags + f" --xla_force_host_platform_device_count={n}").strip()
+    os.environ["XLA_FLAGS"] = (flags + " " + flag.format(n)).strip()
 
 
 def _jax_started() -> bool:
@@ -69,19 +72,24 @@ def _jax_started() -> bool:
         return True
 
 
+def configure_host_devices() -> None:
+    """Expose one XLA CPU device per core (at most ``MAX_HOST_DEVICES``) if JAX has not started yet."""
+    _add_xla_flag("xla_force_host_platform_device_count", "--xla_force_host_platform_device_count={}",
+                  "TRACKENV_HOST_DEVICES", min(_cores(), MAX_HOST_DEVICES), "devices", minimum=2)
+
+
 def configure_small_loops() -> None:
     """Let XLA emit loops of up to ``SMALL_LOOP_BYTES`` as one kernel, if JAX has not started yet."""
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_backend_extra_options" in flags:
-        return
-    want = os.environ.get("TRACKENV_SMALL_LOOP_BYTES")
-    try:
-        n = int(want) if want else SMALL_LOOP_BYTES
-    except ValueError:
-        raise ValueError(f"TRACKENV_SMALL_LOOP_BYTES must be an integer number of bytes, got {want!r}") from None
-    if n <= 0 or _jax_started():
-        return
-    os.environ["XLA_FLAGS"] = (flags + f" --xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={n}").strip()
+    _add_xla_flag("xla_backend_extra_options",
+                  "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={}",
+                  "TRACKENV_SMALL_LOOP_BYTES", SMALL_LOOP_BYTES, "bytes", minimum=1)
+
+
+def substep_loop_is_one_kernel(compiled) -> bool:
+    """True if a compiled simulation (``jax.stages.Compiled``) emits its substep loop as one kernel: a call
+    XLA marks ``xla_cpu_small_call`` that carries per-track element arrays (float (2, N, ...))."""
+    return any("xla_cpu_small_call" in line and re.search(r"f(32|64)\[2,\d+", line)
+               for line in compiled.as_text().splitlines())
 
 
 def cpu_devices():
