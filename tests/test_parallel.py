@@ -113,3 +113,21 @@ def test_small_loops_are_one_kernel_and_change_nothing_but_speed(tmp_path):
     assert np.abs(a["speed_ideal"]).max() > 0.3 and np.abs(a["yaw_rate"]).max() > 0.1  # it drove and turned
     for k in ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "y"):
         np.testing.assert_allclose(a[k], b[k], rtol=1e-5, atol=1e-6 * np.abs(b[k]).max(), err_msg=k)
+
+
+def test_env_step_computes_its_parameters_inside_the_row_loop():
+    """The env's compiled step keeps what it derives from the parameters inside its row loop: the program's
+    entry computation holds a handful of kernels, not the ~50 that loop-invariant code motion lifts out of
+    the loop without the barrier in ``rows._row_params`` (each a separate task of XLA's CPU runtime, every
+    step). With small loops as one kernel, the go-stop's whole row loop is one call."""
+    import gymnasium as gym
+
+    env = gym.make("trackenv/GoStop-v0").unwrapped
+    env.reset(seed=0)
+    args = (env._sf, env._si, np.zeros((1, 2), np.float32), env._disabled, env._one, env._pf, env._pi)
+    text = env._step_fn.lower(*args).compile().as_text()
+    entry = text[text.index("\nENTRY"):]
+    entry = entry[: entry.index("\n}")]
+    assert entry.count(" fusion(") <= 10, entry
+    if "xla_cpu_small_while_loop_byte_threshold" in os.environ.get("XLA_FLAGS", ""):
+        assert "xla_cpu_small_call" in entry and " while(" not in entry

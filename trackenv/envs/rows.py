@@ -24,8 +24,9 @@ whatever the batch: the same seed and actions give bit-identical observations, r
 physical state in ``gym.make`` and in any sub-environment of ``TrackVectorEnv``.
 
 Cost: the rows are stepped one after another, so a vector env of N costs about N single-env steps (the
-batched programs of ``physics_batching="vmap"/"native"`` are faster, README Performance); the single
-env's step costs what it did.
+batched programs of ``physics_batching="vmap"/"native"`` are faster, README Performance). Everything a
+row needs, the parameters' derived quantities included, is computed inside the loop body, so that a loop
+XLA emits as one kernel leaves only a handful of kernels around it per call.
 
 Shapes: ``sf`` (rows, n_float) float32 and ``si`` (rows, n_int) int32 (the state codec's vectors);
 ``packed`` (rows, K) float32 in the layout of :func:`trackenv.envs.core.pack` with physics and final
@@ -79,10 +80,18 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
     if key in _FNS:
         return _FNS[key]
 
-    def reset_rows(sf, si, seeds, mask, count, pf, pi):
-        params = pcodec.unravel(pf, pi)
+    def _row_params(f, i, pf, pi):
+        # The parameters are unravelled inside the row loop, tied to the row's state by an optimisation
+        # barrier. Without it, XLA's loop-invariant code motion lifts everything computed from the parameters
+        # alone out of the row loop, into ~50 separate kernels per call (each a task of XLA's CPU runtime),
+        # whereas the loop itself is emitted as one kernel (``parallel.configure_small_loops``) for the go-stop
+        # and the zero-radius turn. Same arithmetic: the trajectories are bit-identical (README, Performance).
+        f, i, pf, pi = jax.lax.optimization_barrier((f, i, pf, pi))
+        return f, i, pcodec.unravel(pf, pi)
 
+    def reset_rows(sf, si, seeds, mask, count, pf, pi):
         def one(f, i, seed, reset_it):
+            f, i, params = _row_params(f, i, pf, pi)
             state, out = core.reset(jax.random.PRNGKey(seed), params)
             nf, ni = scodec.ravel(state)
             return jnp.where(reset_it, nf, f), jnp.where(reset_it, ni, i), core.pack(state, out, params, final=out)
@@ -90,9 +99,8 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
         return _over_rows(one, count, sf.shape[0], sf, si, seeds, mask)
 
     def step_rows(sf, si, actions, mode, count, pf, pi):
-        params = pcodec.unravel(pf, pi)
-
         def one(f, i, a):
+            f, i, params = _row_params(f, i, pf, pi)
             state, out, final = core.step_autoreset(scodec.unravel(f, i), a, params, mode)
             nf, ni = scodec.ravel(state)
             return nf, ni, core.pack(state, out, params, final=final)
