@@ -19,6 +19,7 @@ pytest.importorskip("stable_baselines3")
 from trackenv import drivers  # noqa: E402
 from trackenv.cli import main  # noqa: E402
 from trackenv.envs import controllers  # noqa: E402
+from trackenv.envs.tasks import task_class  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -282,6 +283,37 @@ def test_guided_plain_driver_fades_the_classical_part_and_saves_a_plain_policy(t
         warnings.simplefilter("ignore")
         model = drivers.load_policy(res.model_path, "go_stop", "dry_sand")
     assert drivers.Learned(model).ctrl is None  # acts alone
+
+
+def test_guide_release_stop_leaves_the_stop_to_the_policy():
+    """``guide_release_stop``: in the J-turn's stop phase (observation phase_stop = 1) the guide's classical
+    part is not applied; outside it, it is. Without a guide, or on a task without a stop phase, it is a
+    config error naming the key."""
+    gains = controllers.load_gains("j_turn", "asphalt")
+    venv, _, guided = drivers.make_vec_env("j_turn", "asphalt", 2, {}, seed=1000,
+                                           residual={"scale": 1.0, "gains": gains, "classical_weight": 1.0,
+                                                     "release_stop": True})
+    col = guided.release_column
+    assert col == list(task_class("j_turn").obs_names).index("phase_stop")
+    venv.reset()
+    steps = []  # (phase_stop before the step, |PI voltages|, the weight applied)
+    for _ in range(120):
+        before = guided._obs.copy()
+        _, _, dones, _ = venv.step(np.zeros((2, 2), np.float32))  # the policy adds nothing: the guide drives
+        steps.append((float(before[0, col]), float(np.abs(guided.last_classical[0]).sum()), float(guided.last_weight[0])))
+        if dones.any():
+            break
+    assert any(p == 0.0 and c > 0.05 and w == 1.0 for p, c, w in steps), "the guide drives before the stop phase"
+    stop = [(c, w) for p, c, w in steps if p == 1.0]
+    assert stop and all(w == 0.0 for _, w in stop), "in the stop phase the classical part is released"
+    assert any(c > 0.0 for c, _ in stop), "the PI would still act there"
+    venv.close()
+    for bad in ({"guide": 0.0, "guide_release_stop": True}, {"guide": 0.5, "guide_release_stop": "yes"}):
+        with pytest.raises(ConfigError, match="guide_release_stop"):
+            drivers.load_config("ppo", "j_turn", config={"default": {"n_timesteps": 64, **bad}})
+    with pytest.raises(ConfigError, match="phase_stop"):
+        drivers.load_config("ppo", "go_stop", config={"default": {"n_timesteps": 64, "guide": 0.5,
+                                                                  "guide_release_stop": True}})
 
 
 def test_speed_error_penalty_makes_standing_still_costly():

@@ -71,7 +71,7 @@ ENV_NAME = ENV_NAMES  # task id -> env name
 TERRAINS = ("dry_sand", "asphalt")  # the shipped drivers' terrains; any configs/terrain id trains
 ALGOS = ("ppo", "sac")
 META_KEYS = ("n_envs", "n_timesteps", "policy", "policy_kwargs", "env_kwargs", "checkpoint_freq", "residual",
-             "error_weight", "guide", "speed_error_weight", "imitate")
+             "error_weight", "guide", "guide_release_stop", "speed_error_weight", "imitate")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -228,6 +228,8 @@ def load_config(algo: str, task: str, terrain: str | None = None, config: str | 
                 merged[k] = copy.deepcopy(v)
     label = f"{where} [{' + '.join(k for k in order if k in raw)}]"
     cfg = _validate_values(merged, label)
+    if cfg["guide_release_stop"] and "phase_stop" not in task_class(task).obs_names:
+        raise ConfigError(f"{label}: 'guide_release_stop' needs a phase_stop observation, which {env_name} does not have")
     if cfg["speed_error_weight"] > 0 and "speed_error" not in task_class(task).obs_names:
         raise ConfigError(f"{label}: 'speed_error_weight' needs a speed_error observation, which "
                           f"{env_name} does not have")
@@ -258,6 +260,12 @@ def _validate_values(cfg: dict, where: str) -> dict:
     if cfg["guide"] > 0 and cfg["residual"] > 0:
         raise ConfigError(f"{where}: 'guide' is a plain driver's curriculum and needs 'residual: 0', "
                           f"got residual {cfg['residual']!r}")
+    cfg.setdefault("guide_release_stop", False)
+    if not isinstance(cfg["guide_release_stop"], bool):
+        raise ConfigError(f"{where}: 'guide_release_stop' must be true or false, got {cfg['guide_release_stop']!r}")
+    if cfg["guide_release_stop"] and not cfg["guide"] > 0:
+        raise ConfigError(f"{where}: 'guide_release_stop' releases the guided curriculum's classical part in the "
+                          "stop phase and needs 'guide' > 0")
     _number(cfg, "error_weight", 0.0, 1e3, where, "a non-negative number", upper_open=True)
     cfg.setdefault("imitate", 0)
     m = cfg["imitate"]

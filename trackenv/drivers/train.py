@@ -59,8 +59,8 @@ from .wrappers import ErrorPenalty, GuideSchedule, ResidualVecEnv, StepTimer
 def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None = None, seed: int | None = None,
                  residual: dict | None = None, error_weight: float = 0.0, speed_error_weight: float = 0.0):
     """The SB3 training env: ``SB3VecEnv`` (normalised actions) in a step timer and ``VecMonitor``;
-    with ``residual`` (``{"scale": r, "gains": {...}}``, optionally ``"classical_weight"``) the policy's
-    action is added to the classical controller's (:class:`~trackenv.drivers.wrappers.ResidualVecEnv`);
+    with ``residual`` (``{"scale": r, "gains": {...}}``, optionally ``"classical_weight"`` and ``"release_stop"``)
+    the policy's action is added to the classical controller's (:class:`~trackenv.drivers.wrappers.ResidualVecEnv`);
     with ``error_weight`` > 0 the reward is shaped on the task's primary tracking error, with
     ``speed_error_weight`` > 0 also on its speed error (:class:`~trackenv.drivers.wrappers.ErrorPenalty`).
     Returns the env, the step timer and the ``ResidualVecEnv`` (None without ``residual``)."""
@@ -71,7 +71,9 @@ def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None =
     venv = SB3VecEnv(task=resolve_task(task), num_envs=int(n_envs), normalize_action=True, terrain=terrain,
                      **(env_kwargs or {}))
     timer = StepTimer(venv)
-    inner = (ResidualVecEnv(timer, residual["scale"], residual["gains"], residual.get("classical_weight", 1.0))
+    inner = (ResidualVecEnv(timer, residual["scale"], residual["gains"], residual.get("classical_weight", 1.0),
+                            release_column=(venv.venv.obs_names.index("phase_stop") if residual.get("release_stop")
+                                            else None))
              if residual else timer)
     mon = VecMonitor(inner, info_keywords=("is_success", "tracking_rmse"))
     if error_weight > 0:
@@ -250,8 +252,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         driver_meta["gains"] = gains
         residual = {"scale": cfg["residual"], "gains": gains}
     elif cfg["guide"] > 0:  # a plain driver's curriculum: the classical part fades out during training
-        driver_meta["guide"] = {"fraction": cfg["guide"], "gains": gains}
-        residual = {"scale": 1.0, "gains": gains, "classical_weight": 1.0}
+        driver_meta["guide"] = {"fraction": cfg["guide"], "gains": gains, "release_stop": cfg["guide_release_stop"]}
+        residual = {"scale": 1.0, "gains": gains, "classical_weight": 1.0, "release_stop": cfg["guide_release_stop"]}
     elif cfg["imitate"] > 0:  # a plain driver's warm start from the classical controller's episodes
         driver_meta["imitate"] = {"steps": cfg["imitate"], "gains": gains}
         residual = {"scale": 1.0, "gains": gains, "classical_weight": 0.0}

@@ -58,10 +58,13 @@ class ResidualVecEnv(_VecEnvWrapper):
     guided curriculum lowers it from 1 to 0, :class:`GuideSchedule`).
 
     The classical PI controller (:class:`trackenv.envs.controllers.ClassicalController`) runs on the same
-    observations, one integrator per environment, reset when an episode ends.
+    observations, one integrator per environment, reset when an episode ends. With ``release_column`` (the
+    index of a 0/1 observation, the J-turn's ``phase_stop``), ``w`` is 0 in the environments where that
+    observation is 1: a guided plain policy brakes for the stop on its own from the start of training.
     """
 
-    def __init__(self, venv, scale: float, gains: dict, classical_weight: float = 1.0):
+    def __init__(self, venv, scale: float, gains: dict, classical_weight: float = 1.0,
+                 release_column: int | None = None):
         super().__init__(venv)
         from ..envs.controllers import classical_for  # noqa: PLC0415
 
@@ -72,6 +75,7 @@ class ResidualVecEnv(_VecEnvWrapper):
         self.scale = float(scale)
         self.ctrl = classical_for(self.params, gains)
         self.classical_weight = float(classical_weight)
+        self.release_column = release_column
         self._obs = None
 
     def reset(self):
@@ -81,7 +85,11 @@ class ResidualVecEnv(_VecEnvWrapper):
 
     def step_async(self, actions):
         self.last_classical = self.ctrl(self._obs)
-        a = self.classical_weight * self.last_classical + self.scale * np.asarray(actions, np.float32)
+        w = np.full((len(self._obs), 1), self.classical_weight, np.float32)
+        if self.release_column is not None:
+            w = w * (1.0 - self._obs[:, self.release_column, None])
+        self.last_weight = w[:, 0]  # the classical part's weight in each environment at this step
+        a = w * self.last_classical + self.scale * np.asarray(actions, np.float32)
         self.venv.step_async(np.clip(a, -1.0, 1.0).astype(np.float32))
 
     def step_wait(self):
