@@ -115,14 +115,16 @@ def test_small_loops_are_one_kernel_and_change_nothing_but_speed(tmp_path):
         np.testing.assert_allclose(a[k], b[k], rtol=1e-5, atol=1e-6 * np.abs(b[k]).max(), err_msg=k)
 
 
-def test_env_step_computes_its_parameters_inside_the_row_loop():
+@pytest.mark.parametrize("env_name", ["GoStop-v0", "JTurn-v0", "LaneChange-v0", "ZeroRadiusTurn-v0"])
+def test_env_step_is_one_kernel(env_name):
     """The env's compiled step keeps what it derives from the parameters inside its row loop: the program's
     entry computation holds a handful of kernels, not the ~50 that loop-invariant code motion lifts out of
     the loop without the barrier in ``rows._row_params`` (each a separate task of XLA's CPU runtime, every
-    step). With small loops as one kernel, the go-stop's whole row loop is one call."""
+    step). With small loops as one kernel, the row loop with the whole step in it is one call on every task,
+    the path tasks (whose state carries the reference polyline) included."""
     import gymnasium as gym
 
-    env = gym.make("trackenv/GoStop-v0").unwrapped
+    env = gym.make(f"trackenv/{env_name}").unwrapped
     env.reset(seed=0)
     args = (env._sf, env._si, np.zeros((1, 2), np.float32), env._disabled, env._one, env._pf, env._pi)
     text = env._step_fn.lower(*args).compile().as_text()

@@ -23,9 +23,10 @@ it as one function (its small-while-loop hoisting pass, 1 kB by default). :func:
 (called with :func:`configure_host_devices`) raises that limit to :data:`SMALL_LOOP_BYTES`, through
 ``--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold``, under the same conditions (JAX not
 started, the option not already in ``XLA_FLAGS``); ``TRACKENV_SMALL_LOOP_BYTES=0`` opts out. The limit
-takes single vehicles and batches of a few (about 4) vehicles: one trajectory ran 1.6x faster with it.
-A larger limit also takes larger batches, and those lose: with 1 MB (batches up to about 16) the
-64-environment vector env ran 0.67x as fast. From about 160 vehicles the contact-point sums are a
+takes one vehicle's simulation (one trajectory ran 1.6x faster with it), batches of up to about 12
+vehicles, and the single env's whole step, row loop included, on every task (0.03-0.30 MB by XLA's cost
+analysis; the path tasks' reference polylines make theirs the largest). A larger limit also takes larger
+batches, and those lose: with 1 MB the 64-environment vector env ran 0.67x as fast. From about 160 vehicles the contact-point sums are a
 library reduce (:mod:`trackenv.physics.sums`) that the pass does not take (README, Performance).
 """
 
@@ -37,7 +38,7 @@ import re
 MIN_PER_DEVICE = 256  # vehicles per core below which a batch is not split (measured, README Performance)
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8
-SMALL_LOOP_BYTES = 100_000  # XLA's small-while-loop limit [bytes accessed by the loop] (measured, README)
+SMALL_LOOP_BYTES = 400_000  # XLA's small-while-loop limit [bytes accessed by the loop] (measured, README)
 
 
 def _cores() -> int:

@@ -51,18 +51,28 @@ def mode_index(mode: str) -> np.ndarray:
 
 
 def _over_rows(one, count, rows: int, *row_args):
-    """``one(*row_k)`` -> (f, i, packed) for rows k < ``count``, written into copies of ``row_args[:2]``."""
+    """``one(*row_k)`` -> (f, i, packed) for rows k < ``count``, written into copies of ``row_args[:2]``.
+
+    The state and the packed output are carried as flat vectors and each row is a ``dynamic_slice`` of
+    them: XLA's cost analysis, which decides whether the loop is emitted as one kernel, then counts the
+    bytes of the row each kernel reads, not of the whole (rows, n) array (for the lane change 0.30 MB
+    against 1.5 MB per step).
+    """
     sf, si = row_args[0], row_args[1]
+    n_f, n_i = sf.shape[1], si.shape[1]
     width = jax.eval_shape(one, *(x[0] for x in row_args))[2].shape[0]
-    packed = jnp.zeros((rows, width), jnp.float32)
+    carry = (sf.reshape(-1), si.reshape(-1), jnp.zeros((rows * width,), jnp.float32))
 
     def body(k, carry):
         f_all, i_all, p_all = carry
-        f, i, p = one(*(jax.lax.dynamic_index_in_dim(x, k, keepdims=False) for x in (f_all, i_all) + row_args[2:]))
-        return (jax.lax.dynamic_update_index_in_dim(f_all, f, k, 0), jax.lax.dynamic_update_index_in_dim(i_all, i, k, 0),
-                jax.lax.dynamic_update_index_in_dim(p_all, p, k, 0))
+        f = jax.lax.dynamic_slice(f_all, (k * n_f,), (n_f,))
+        i = jax.lax.dynamic_slice(i_all, (k * n_i,), (n_i,))
+        f, i, p = one(f, i, *(jax.lax.dynamic_index_in_dim(x, k, keepdims=False) for x in row_args[2:]))
+        return (jax.lax.dynamic_update_slice(f_all, f, (k * n_f,)), jax.lax.dynamic_update_slice(i_all, i, (k * n_i,)),
+                jax.lax.dynamic_update_slice(p_all, p, (k * width,)))
 
-    return jax.lax.fori_loop(0, count, body, (sf, si, packed))
+    f_all, i_all, p_all = jax.lax.fori_loop(0, count, body, carry)
+    return f_all.reshape(rows, n_f), i_all.reshape(rows, n_i), p_all.reshape(rows, width)
 
 
 _FNS: dict = {}
