@@ -94,8 +94,8 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
         # The parameters are unravelled inside the row loop, tied to the row's state by an optimisation
         # barrier. Without it, XLA's loop-invariant code motion lifts everything computed from the parameters
         # alone out of the row loop, into ~50 separate kernels per call (each a task of XLA's CPU runtime),
-        # whereas the loop itself is emitted as one kernel (``parallel.configure_small_loops``) for the go-stop
-        # and the zero-radius turn. Same arithmetic: the trajectories are bit-identical (README, Performance).
+        # whereas the loop itself is emitted as one kernel (``parallel.configure_small_loops``). Same
+        # arithmetic: the trajectories are bit-identical (README, Performance).
         f, i, pf, pi = jax.lax.optimization_barrier((f, i, pf, pi))
         return f, i, pcodec.unravel(pf, pi)
 
