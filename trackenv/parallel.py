@@ -26,8 +26,9 @@ started, the option not already in ``XLA_FLAGS``); ``TRACKENV_SMALL_LOOP_BYTES=0
 takes one vehicle's simulation (one trajectory ran 1.6x faster with it), batches of up to about 12
 vehicles, and the single env's whole step, row loop included, on every task (0.03-0.30 MB by XLA's cost
 analysis; the path tasks' reference polylines make theirs the largest). A larger limit also takes larger
-batches, and those lose: with 1 MB the 64-environment vector env ran 0.67x as fast. From about 160 vehicles the contact-point sums are a
-library reduce (:mod:`trackenv.physics.sums`) that the pass does not take (README, Performance).
+batches, and those lose: with 1 MB the 64-environment vector env ran 0.67x as fast. From about 160
+vehicles the contact-point sums are a library reduce (:mod:`trackenv.physics.sums`) that the pass does not
+take (README, Performance).
 """
 
 from __future__ import annotations

@@ -99,15 +99,9 @@ def main(only=None, sections=SECTIONS):
         if "nominal" in sections:
             figures = ROOT / "train" / "figures" / {"residual": "", "randomized": "randomized", PLAIN: PLAIN}[kind]
             rec["nominal"] = evaluate(task, terrain, model, episodes=4, seed=1000, figures=figures)
-        if "soils" in sections:
-            rec["soils"] = {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in SOILS}
-        if "table_5_6" in sections:
-            rec["table_5_6"] = evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
-        if "outside" in sections:
-            rec["outside"] = evaluate(task, terrain, model, episodes=16, seed=3000,
-                                      randomize=outside_ranges(load_params(terrain)))
-        if "effects" in sections:
-            rec["effects"] = evaluate_effects(task, terrain, model)
+        for section in SECTIONS[1:]:
+            if section in sections:
+                rec[section] = evaluate_section(section, task, terrain, model)
         results[name] = jsonable(rec)
         out_json.write_text(json.dumps(results, indent=1) + "\n")
         print(f"{name}: {time.time() - t0:.0f} s", flush=True)
@@ -117,6 +111,20 @@ def main(only=None, sections=SECTIONS):
             print(format_effects(name, results[name]["effects"]), flush=True)
     write_md(results)
     write_driver_summary(results)
+
+
+def evaluate_section(section, task, terrain, model, soils=SOILS):
+    """One section's evaluation of ``model`` (every section but ``nominal``, which also draws figures; see the
+    module docstring); ``soils``: the Table 5.5 soils of the ``soils`` section."""
+    if section == "soils":
+        return {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in soils}
+    if section == "table_5_6":
+        return evaluate(task, terrain, model, episodes=16, seed=2000, randomize=True)
+    if section == "outside":
+        return evaluate(task, terrain, model, episodes=16, seed=3000, randomize=outside_ranges(load_params(terrain)))
+    if section == "effects":
+        return evaluate_effects(task, terrain, model)
+    raise ValueError(f"unknown section {section!r}; known: {SECTIONS[1:]}")
 
 
 # ----------------------------------------------------------------------------------------------

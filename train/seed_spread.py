@@ -27,14 +27,12 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "train"))
 torch.set_num_threads(1)
 
-from evaluate_drivers import HELD_OUT_SOILS, compare_methods, evaluate_effects, held_out_cases  # noqa: E402
+from evaluate_drivers import HELD_OUT_SOILS, compare_methods, evaluate_section, held_out_cases  # noqa: E402
 
-from trackenv.drivers import ENV_NAME, evaluate, load_policy  # noqa: E402
+from trackenv.drivers import ENV_NAME, load_policy  # noqa: E402
 from trackenv.drivers.config import RANDOMIZED_SUFFIX  # noqa: E402
 from trackenv.drivers.episodes import jsonable  # noqa: E402
 from trackenv.drivers.train import train  # noqa: E402
-from trackenv.envs.randomization import outside_ranges  # noqa: E402
-from trackenv.params import load_params  # noqa: E402
 
 OUT_JSON = ROOT / "train" / "seeds.json"
 OUT_MD = ROOT / "train" / "seeds.md"
@@ -52,11 +50,10 @@ def parse_name(name: str) -> tuple[str, str]:
 
 
 def held_out_record(task, terrain, model) -> dict:
-    """The held-out sections of ``evaluate_drivers.py`` for one policy."""
-    return {"soils": {s: evaluate(task, terrain, model, episodes=1, seed=1000, sim_terrain=s) for s in HELD_OUT_SOILS},
-            "outside": evaluate(task, terrain, model, episodes=16, seed=3000,
-                                randomize=outside_ranges(load_params(terrain))),
-            "effects": evaluate_effects(task, terrain, model)}
+    """The held-out sections of ``evaluate_drivers.py`` for one policy (its soils section on the held-out soils)."""
+    return {"soils": evaluate_section("soils", task, terrain, model, soils=HELD_OUT_SOILS),
+            "outside": evaluate_section("outside", task, terrain, model),
+            "effects": evaluate_section("effects", task, terrain, model)}
 
 
 def counts(rec) -> dict:
