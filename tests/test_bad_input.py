@@ -281,6 +281,16 @@ case("domain_randomization effect range out of its bounds", "env option",
      lambda t: call(lambda: gym.make("trackenv/ZeroRadiusTurn-v0", effects=["slip_sinkage"],
                                      domain_randomization={"effects.0.max_sinkage": (0.01, 0.5)})),
      expect_error(te.ConfigError, "'effects.0.max_sinkage'", "slip_sinkage"))
+case("ground mixture with an unknown terrain", "env option",
+     lambda t: call(lambda: gym.make("trackenv/GoStop-v0", domain_randomization={"grounds": ["asphalt", "moon"]})),
+     expect_error(te.ConfigError, "'grounds'", "unknown terrain 'moon'", "sandy_loam_1"))
+case("ground mixture with ranges beside it", "env option",
+     lambda t: call(lambda: gym.make("trackenv/GoStop-v0",
+                                     domain_randomization={"grounds": ["asphalt"], "vehicle.mass": (16.0, 20.0)})),
+     expect_error(te.ConfigError, "'grounds' only", "vehicle.mass"))
+case("ground mixture given one name, not a list", "env option",
+     lambda t: call(lambda: gym.make("trackenv/GoStop-v0", domain_randomization={"grounds": "asphalt"})),
+     expect_error(te.ConfigError, "'grounds' must be a non-empty list", "'asphalt'"))
 case("mistyped keyword terain=", "env option",
      lambda t: call(lambda: gym.make("trackenv/GoStop-v0", terain="asphalt")),
      expect_error(TypeError, "'terain'", "did you mean 'terrain'", "terrain", "effects", "substep", "target_speed"))

@@ -136,6 +136,20 @@ def test_randomized_training_names_the_driver_and_records_the_ranges(tmp_path):
     assert model.trackenv_driver["domain_randomization"] is True
 
 
+def test_ground_mixture_training_records_the_grounds(tmp_path):
+    cfg = {"default": {"n_envs": 4, "n_timesteps": 64, "n_steps": 16, "batch_size": 32, "n_epochs": 1,
+                       "policy_kwargs": {"net_arch": [8]}, "env_kwargs": {"max_time": 0.5}}}
+    with pytest.raises(ConfigError, match="randomize"):
+        drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, config=cfg, grounds=["asphalt", "dry_sand"])
+    with pytest.raises(ConfigError, match="unknown terrain 'moon'"):
+        drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, config=cfg, randomize=True, grounds=["moon"])
+    res = drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, progress_bar=False, tensorboard=False,
+                        randomize=True, grounds=["asphalt", "dry_sand"], config=cfg)
+    assert res.info["config"]["env_kwargs"]["domain_randomization"] == {"grounds": ["asphalt", "dry_sand"]}
+    assert res.info["command"].endswith("--randomize --grounds asphalt,dry_sand")
+    assert res.model_path.name == "GoStop-v0-asphalt-randomized.zip"
+
+
 def test_load_warns_pickle_and_checks_spaces(tiny_policy, capsys):
     with pytest.warns(drivers.PickleWarning, match="trusted sources"):
         model = drivers.load_policy(tiny_policy.model_path, "go_stop", "dry_sand")

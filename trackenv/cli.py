@@ -154,7 +154,8 @@ def cmd_train(args) -> int:
         command = "trackenv " + " ".join(sys.argv[1:])
     res = train(task, terrain, algo, config=args.config, seed=args.seed, timesteps=args.timesteps, out_dir=args.out,
                 run_dir=args.run_dir, resume=args.resume, progress_bar=not args.no_progress,
-                verbose=1 if args.verbose else 0, command=command, randomize=args.randomize)
+                verbose=1 if args.verbose else 0, command=command, randomize=args.randomize,
+                grounds=args.grounds.split(",") if args.grounds else None)
     i = res.info
     if i["final_mean_return"] is None:
         outcome = "no episode finished during training (no mean return or success rate to report)"
@@ -312,6 +313,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--randomize", action="store_true",
                    help="domain-randomised training: every episode on parameters drawn from the terrain's default "
                         "ranges (trackenv/envs/randomization.py); the driver is named <EnvName>-<terrain>-randomized")
+    t.add_argument("--grounds", metavar="T1,T2",
+                   help="with --randomize: a ground mixture, every episode on one of these terrain ids drawn first, "
+                        "then within its default ranges (e.g. asphalt,dry_sand)")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.add_argument("--verbose", action="store_true", help="print SB3's training table")
     t.set_defaults(func=cmd_train)

@@ -58,3 +58,29 @@ def test_randomised_parameters_within_ranges():
         st = env.unwrapped.state
         np.testing.assert_allclose(float(st.sim.terrain.cohesion), info["params"]["terrain.cohesion"], rtol=1e-6)
     assert len(set(seen)) == 5
+
+
+def test_ground_mixture_draws_whole_terrains():
+    """A ground mixture draws a terrain per episode, then samples inside that terrain's own box: the
+    drawn terrain's unranged parameters (Bekker sinkage, deformable) are the terrain file's, exactly."""
+    from trackenv import load_params
+    from trackenv.envs.randomization import default_ranges
+
+    names = ["asphalt", "sandy_loam_2"]
+    env = gym.make("trackenv/GoStop-v0", terrain="asphalt", domain_randomization={"grounds": names})
+    loaded = [load_params(n) for n in names]
+    drawn = set()
+    for seed in range(8):
+        _, info = env.reset(seed=seed)
+        g = int(info["params"].pop("ground"))
+        drawn.add(g)
+        sim = env.unwrapped.state.sim
+        ref = loaded[g]
+        for field in ("deformable", "sinkage_exponent", "k_c", "k_phi"):
+            assert float(getattr(sim.terrain, field)) == float(getattr(ref.terrain, field)), field
+        box = default_ranges(ref)
+        for path, value in info["params"].items():
+            # asphalt's box does not range the cohesion: it stays the terrain file's
+            lo, hi = box.get(path, (float(ref.terrain.cohesion),) * 2)
+            assert lo - 1e-5 * abs(lo) - 1e-9 <= value <= hi + 1e-5 * abs(hi) + 1e-9, (names[g], path, value, lo, hi)
+    assert drawn == {0, 1}

@@ -203,12 +203,16 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
           seed: int = 0, timesteps: int | None = None, out_dir: str | Path | None = None,
           run_dir: str | Path | None = None, resume: bool = False,
           progress_bar: bool = True, tensorboard: bool = True, verbose: int = 0, threads: int = 1,
-          command: str | None = None, randomize: bool = False) -> TrainResult:
+          command: str | None = None, randomize: bool = False, grounds: list[str] | tuple[str, ...] | None = None,
+          ) -> TrainResult:
     """Train a driver and save ``<out_dir>/<EnvName>-<terrain>.zip`` plus its ``.json`` record.
 
     ``randomize``: domain-randomised training, every episode on parameters drawn from the default ranges
     of ``terrain`` (:mod:`trackenv.envs.randomization`; sets ``env_kwargs.domain_randomization`` unless
-    the config sets it); the driver is named ``<EnvName>-<terrain>-randomized``.
+    the config sets it); the driver is named ``<EnvName>-<terrain>-randomized``. ``grounds`` (with
+    ``randomize``): a ground mixture instead, every episode on one of these terrains drawn first, then
+    within its default ranges (``domain_randomization={"grounds": [...]}``); ``terrain`` still names the
+    driver, its classical gains and its open-loop profile.
 
     Everything is validated (task, terrain, algorithm, config keys and values) before an environment
     is built. ``timesteps`` overrides the config's ``n_timesteps``; ``resume`` continues from the
@@ -225,9 +229,12 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
             raise ConfigError(f"timesteps must be a positive integer, got {timesteps!r}")
         cfg["n_timesteps"] = int(timesteps)
     check_budget(cfg, algo, where="--timesteps" if timesteps is not None else "n_timesteps")
+    if grounds is not None and not randomize:
+        raise ConfigError("grounds: a ground mixture is a domain randomisation; pass randomize=True (--randomize)")
     if randomize:
         cfg["env_kwargs"] = {**cfg["env_kwargs"]}
-        cfg["env_kwargs"].setdefault("domain_randomization", True)
+        cfg["env_kwargs"].setdefault("domain_randomization",
+                                     True if grounds is None else {"grounds": [resolve_terrain(g) for g in grounds]})
     name = driver_name(task, terrain, randomized=randomize)
     out = Path(out_dir) if out_dir is not None else ROOT / "out" / "train" / f"{name}-{algo}-s{seed}"
     run = Path(run_dir) if run_dir is not None else out
@@ -306,7 +313,8 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         "final_mean_return": float(np.mean([e["r"] for e in ep])) if ep else None,
         "final_success_rate": float(np.mean([e.get("is_success", 0.0) for e in ep])) if ep else None,
         "command": command or (f"trackenv train {env_name} --terrain {terrain} --algo {algo} --seed {seed}"
-                               + (" --randomize" if randomize else "")),
+                               + (" --randomize" if randomize else "")
+                               + (f" --grounds {','.join(grounds)}" if grounds else "")),
         "versions": _versions(), "model_bytes": model_path.stat().st_size,
     }
     info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)

@@ -46,7 +46,7 @@ import numpy as np
 
 from ..effects import resolve_effects
 from ..integrate import advance_constant, is_physical
-from ..params import Params, load_params
+from ..params import ConfigError, Params, load_params
 from ..physics.model import State, initial_state
 from ..simulate import DEFAULT_SUBSTEP, check_substep, n_substeps
 from . import randomization
@@ -79,7 +79,8 @@ class EnvParams(eqx.Module):
 
     sim: nominal simulation parameters (terrain, vehicle, internal resistance, effects).
     task: the task module (targets, tolerances, reward weights).
-    dr_low/dr_high: per-episode sampling ranges of the parameters named by ``dr_paths``.
+    dr_low/dr_high: per-episode sampling ranges of the parameters named by ``dr_paths``; for a ground
+    mixture, one row per terrain of ``dr_grounds`` (its terrains' Params stacked on a leading axis).
     obs_low/obs_high: observation bounds (float32).
     """
 
@@ -96,6 +97,7 @@ class EnvParams(eqx.Module):
     substeps: int = eqx.field(static=True)
     voltage_limit: float = eqx.field(static=True)
     physics_batching: str = eqx.field(static=True)
+    dr_grounds: Params | None = None
 
     @property
     def obs_names(self) -> tuple[str, ...]:
@@ -170,13 +172,22 @@ def make_params(
     check_substep(substep, control_dt, "control_dt")
     if physics_batching not in ("vmap", "native"):
         raise ValueError(f"physics_batching must be 'vmap' or 'native', got {physics_batching!r}")
+    from_names = sim_params is None
     if sim_params is None:
         sim_params = load_params(terrain, vehicle, internal_resistance, resolve_effects(effects))
     task_mod, max_time = TASKS[task].create(**task_kwargs)
     if not (math.isfinite(max_time) and max_time > 0):
         raise ValueError(f"max_time must be positive, got {max_time}")
     max_steps = max(1, int(round(max_time / control_dt)))
-    paths, lo, hi = randomization.resolve(sim_params, domain_randomization)
+    grounds = None
+    if isinstance(domain_randomization, dict) and "grounds" in domain_randomization:
+        if not from_names:
+            raise ConfigError("domain randomisation: a ground mixture loads its terrains by name, so it needs "
+                              "terrain/vehicle/internal_resistance/effects, not sim_params")
+        paths, lo, hi, grounds = randomization.resolve_grounds(
+            domain_randomization, lambda name: load_params(name, vehicle, internal_resistance, resolve_effects(effects)))
+    else:
+        paths, lo, hi = randomization.resolve(sim_params, domain_randomization)
     vlim = float(sim_params.vehicle.voltage_limit)
     names = tuple(task_mod.obs_names) + tuple(n for n, _, _ in COMMON_OBS)
     common_lo = [(-vlim if a is None else a) for _, a, _ in COMMON_OBS]
@@ -192,7 +203,7 @@ def make_params(
         action_scale=jnp.asarray(vlim if normalize_action else 1.0, F32),
         dr_paths=paths, control_dt=float(control_dt), substeps=n_substeps(control_dt, substep),
         voltage_limit=vlim,
-        physics_batching=physics_batching,
+        physics_batching=physics_batching, dr_grounds=grounds,
     )
 
 
@@ -304,7 +315,8 @@ def reset(key, params: EnvParams) -> tuple[EnvState, StepResult]:
     Returns the state and a :class:`StepResult` with the first observation (reward 0, flags False).
     """
     k_dr, k_task, k_next = jax.random.split(key, 3)
-    sim, values = randomization.sample(params.sim, k_dr, params.dr_paths, params.dr_low, params.dr_high)
+    sim, values = randomization.sample(params.sim, k_dr, params.dr_paths, params.dr_low, params.dr_high,
+                                       params.dr_grounds)
     phys = initial_state(sim)
     tstate = params.task.init(k_task, sim)
     z = jnp.zeros((), F32)

@@ -19,8 +19,8 @@ Options (keyword arguments of ``gym.make``):
 - ``control_dt``: control step [s], default 0.05; ``substep``: largest integration substep [s],
   default ``trackenv.envs.core.ENV_DEFAULT_SUBSTEP`` (the verified substep of ``simulate``, README),
   at most ``control_dt`` and ``trackenv.simulate.MAX_SUBSTEP`` (else ``ValueError``);
-- ``domain_randomization``: ``False`` (default), ``True`` (default ranges) or a dict of ranges, see
-  :mod:`trackenv.envs.randomization`;
+- ``domain_randomization``: ``False`` (default), ``True`` (default ranges), a dict of ranges or a ground
+  mixture ``{"grounds": [terrain ids]}``, see :mod:`trackenv.envs.randomization`;
 - ``normalize_action``: ``False`` (default, actions in volts) or ``True`` (actions in [-1, 1] times
   the 24 V limit);
 - ``render_mode``: ``None`` or ``"rgb_array"``;

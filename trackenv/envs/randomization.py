@@ -21,6 +21,13 @@ ranges are relative to the loaded terrain and are guesses: friction angle x [0.8
 modulus K x [0.55, 1.45], b*_int x [0.94, 1.5] (the same relative span as the sand range above),
 mass +-10 %. The yaw inertia is not rescaled with the mass.
 
+**A ground mixture** (``domain_randomization={"grounds": ["asphalt", "dry_sand"]}``): every episode
+first draws one of the named terrains (``configs/terrain`` ids), uniformly, then that terrain's default
+ranges above. The terrain file supplies all of its parameters (Bekker sinkage, shear law, b*_int,
+``deformable``), so one batch mixes hard and deformable ground. ``info["params"]["ground"]`` is the
+index of the drawn terrain in the list. The list may omit the env's own terrain, which then only names
+the classical gains and the open-loop profile of a driver.
+
 Only constant-model internal resistance is randomised by default; with the viscous model
 (``internal_resistance="viscous"``) ``internal.viscous`` is scaled x [0.94, 1.5] instead.
 
@@ -143,14 +150,57 @@ def outside_ranges(params: Params) -> dict[str, tuple[float, float]]:
     return out
 
 
+GROUND = "ground"  # the pseudo-path of a ground mixture's drawn terrain (its index in the list)
+
+
+def resolve_grounds(spec: dict, load) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, Params]:
+    """A ground mixture ``{"grounds": names}`` -> (paths, low (K, n), high (K, n), grounds), validated.
+
+    ``load(name)`` builds the :class:`Params` of terrain ``name`` with the env's vehicle, internal
+    resistance model and effects. ``grounds`` stacks them on a leading axis of K terrains. The paths are
+    the union of the terrains' default ranges, then :data:`GROUND`; a path that a terrain does not
+    randomise is pinned at that terrain's value.
+    """
+    if set(spec) != {"grounds"}:
+        raise ConfigError(f"domain randomisation: a ground mixture takes the key 'grounds' only, got {sorted(spec)}")
+    names = spec["grounds"]
+    if isinstance(names, str) or not isinstance(names, (list, tuple)) or not names:
+        raise ConfigError(f"domain randomisation: 'grounds' must be a non-empty list of terrain names, got {names!r}")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"domain randomisation: 'grounds' lists a terrain twice: {list(names)}")
+    loaded = []
+    for name in names:
+        if not isinstance(name, str):
+            raise ConfigError(f"domain randomisation: 'grounds' entries are terrain names, got {name!r}")
+        try:
+            loaded.append(load(name))
+        except ConfigError as exc:
+            raise ConfigError(f"domain randomisation: 'grounds': {exc}") from None
+    structure = {jax.tree_util.tree_structure(p) for p in loaded}
+    if len(structure) > 1:
+        raise ConfigError(f"domain randomisation: the terrains of 'grounds' {list(names)} differ in structure (shear "
+                          f"law {[p.terrain.shear_law for p in loaded]} or effects), so they cannot share one program")
+    boxes = [default_ranges(p) for p in loaded]
+    paths = tuple(dict.fromkeys(k for box in boxes for k in box))
+    low = np.zeros((len(loaded), len(paths)), np.float32)
+    high = np.zeros_like(low)
+    for g, (p, box) in enumerate(zip(loaded, boxes, strict=True)):
+        for n, path in enumerate(paths):
+            value = float(_leaf(p, path))
+            low[g, n], high[g, n] = box.get(path, (value, value))
+    grounds = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *loaded)
+    return (*paths, GROUND), low, high, grounds
+
+
 def resolve(params: Params, spec: Any) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    """``domain_randomization`` option -> (paths, low, high), validated."""
+    """``domain_randomization`` option -> (paths, low, high), validated (a ground mixture: :func:`resolve_grounds`)."""
     if spec is None or spec is False:
         return (), np.zeros(0, np.float32), np.zeros(0, np.float32)
     if spec is True:
         spec = default_ranges(params)
     if not isinstance(spec, dict):
-        raise ConfigError(f"domain_randomization must be True, False or a dict of ranges, got {spec!r}")
+        raise ConfigError(f"domain_randomization must be True, False, a dict of ranges or {{'grounds': [...]}}, "
+                          f"got {spec!r}")
     paths, lows, highs = [], [], []
     for path, rng in spec.items():
         leaf = _leaf(params, path)
@@ -189,14 +239,34 @@ def _check_bounds(params: Params, path: str, lo: float, hi: float) -> None:
         raise ConfigError(f"domain randomisation: {exc}") from None
 
 
-def sample(params: Params, key, paths: tuple[str, ...], low, high) -> tuple[Params, jax.Array]:
-    """Draw one parameter set; returns the new params and the sampled values (n,)."""
+def sample(params: Params, key, paths: tuple[str, ...], low, high, grounds: Params | None = None
+           ) -> tuple[Params, jax.Array]:
+    """Draw one parameter set; returns the new params and the sampled values (n,).
+
+    With ``grounds`` (a ground mixture, :func:`resolve_grounds`) one terrain is drawn first: the params
+    become that terrain's, ``low``/``high`` its row, and the last value its index.
+    """
     if not paths:
         return params, jnp.zeros((0,), jnp.float32)
+    if grounds is not None:
+        k_ground, key = jax.random.split(key)
+        g = jax.random.randint(k_ground, (), 0, low.shape[0])
+        params = jax.tree_util.tree_map(lambda leaf: leaf[g], grounds)
+        values = _draw(key, paths[:-1], low[g], high[g])
+        params = _apply(params, paths[:-1], values)
+        return params, jnp.concatenate([values, g.astype(values.dtype)[None]])
+    values = _draw(key, paths, low, high)
+    return _apply(params, paths, values), values
+
+
+def _draw(key, paths, low, high):
     u = jax.random.uniform(key, (len(paths),), jnp.float32)
-    values = low + u * (high - low)
+    return low + u * (high - low)
+
+
+def _apply(params: Params, paths, values) -> Params:
     for i, path in enumerate(paths):
         where = _getter(path)
         old = where(params)
         params = eqx.tree_at(where, params, values[i].astype(old.dtype))
-    return params, values
+    return params
