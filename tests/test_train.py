@@ -379,3 +379,31 @@ def test_imitation_warm_start_clones_the_classical_controller():
     assert res["action_mse"] < 1e-2 and mse["cloned"] < 5e-3 and mse["cloned"] < 0.05 * mse["untrained"], (res, mse)
     with pytest.raises(ConfigError, match="imitate"):
         drivers.load_config("ppo", "go_stop", config={"default": {"n_timesteps": 64, "guide": 0.5, "imitate": 100}})
+
+
+def test_init_continues_a_trained_driver_and_never_overwrites_it(tmp_path):
+    plain = {"default": {"n_envs": 4, "n_timesteps": 64, "n_steps": 16, "batch_size": 32, "n_epochs": 1,
+                         "residual": 0.0, "policy_kwargs": {"net_arch": [8]}, "env_kwargs": {"max_time": 0.5}}}
+    first = drivers.train("go_stop", "dry_sand", "ppo", out_dir=tmp_path / "a", progress_bar=False, tensorboard=False,
+                          config=plain)
+    polish = {"default": {**plain["default"], "learning_rate": 1e-5}}
+    res = drivers.train("go_stop", "dry_sand", "ppo", out_dir=tmp_path / "b", progress_bar=False, tensorboard=False,
+                        config=polish, init=first.model_path)
+    assert res.info["n_timesteps"] == 64  # a new run of n_timesteps steps, not the first run's counter
+    assert res.info["total_timesteps"] == 128 and res.info["init_record"]["n_timesteps"] == 64
+    assert res.info["total_train_seconds"] > res.info["train_seconds"]
+    assert res.info["init_from"] == str(first.model_path) and "--init" in res.info["command"]
+    model = drivers.load_policy(res.model_path, "go_stop", "dry_sand", warn=False)
+    assert model.learning_rate == 1e-5 and model.trackenv_driver["init_from"] == str(first.model_path)
+    before = drivers.load_policy(first.model_path, "go_stop", "dry_sand", warn=False)
+    w0 = before.policy.state_dict()["action_net.weight"]
+    assert not (model.policy.state_dict()["action_net.weight"] == w0).all()  # it trained on
+    stamp = first.model_path.stat().st_mtime_ns
+    with pytest.raises(ConfigError, match="never overwritten"):
+        drivers.train("go_stop", "dry_sand", "ppo", out_dir=tmp_path / "a", config=polish, init=first.model_path)
+    with pytest.raises(ConfigError, match="residual"):
+        drivers.train("go_stop", "dry_sand", "ppo", out_dir=tmp_path / "c", progress_bar=False, tensorboard=False,
+                      config={"default": {**plain["default"], "residual": 0.3}}, init=first.model_path)
+    with pytest.raises(ConfigError, match="no driver zip"):
+        drivers.train("go_stop", "dry_sand", "ppo", out_dir=tmp_path / "c", config=plain, init=tmp_path / "none.zip")
+    assert first.model_path.stat().st_mtime_ns == stamp

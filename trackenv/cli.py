@@ -155,7 +155,7 @@ def cmd_train(args) -> int:
     res = train(task, terrain, algo, config=args.config, seed=args.seed, timesteps=args.timesteps, out_dir=args.out,
                 run_dir=args.run_dir, resume=args.resume, progress_bar=not args.no_progress,
                 verbose=1 if args.verbose else 0, command=command, randomize=args.randomize,
-                grounds=args.grounds.split(",") if args.grounds else None)
+                grounds=args.grounds.split(",") if args.grounds else None, init=args.init)
     i = res.info
     if i["final_mean_return"] is None:
         outcome = "no episode finished during training (no mean return or success rate to report)"
@@ -316,6 +316,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--grounds", metavar="T1,T2",
                    help="with --randomize: a ground mixture, every episode on one of these terrain ids drawn first, "
                         "then within its default ranges (e.g. asphalt,dry_sand)")
+    t.add_argument("--init", metavar="ZIP",
+                   help="start from this trained driver's weights (the config's hyperparameters, n_timesteps more "
+                        "steps; e.g. a polish stage at a lower learning rate); never overwritten")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.add_argument("--verbose", action="store_true", help="print SB3's training table")
     t.set_defaults(func=cmd_train)

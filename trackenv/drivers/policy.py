@@ -62,10 +62,11 @@ def check_observation_space(model, params) -> None:
 
 
 def load_policy(path: str | Path, task: str, terrain: str = "dry_sand", *, env=None, algo: str | None = None,
-                warn: bool = True):
+                warn: bool = True, overrides: dict | None = None):
     """Load an SB3 policy zip for ``task``; warn that it is a pickle; check its spaces.
 
-    ``algo`` (ppo/sac) is read from the zip when not given. Raises :class:`PolicySpaceError` when
+    ``algo`` (ppo/sac) is read from the zip when not given; ``overrides``: attributes of the model to
+    change as it loads (SB3's ``load`` keywords, e.g. ``learning_rate``). Raises :class:`PolicySpaceError` when
     the zip's observation or action space differs from the environment's, ``FileNotFoundError`` for a
     missing file and ``ConfigError`` for a file that is not an SB3 zip.
     """
@@ -93,7 +94,7 @@ def load_policy(path: str | Path, task: str, terrain: str = "dry_sand", *, env=N
     if zact is None or not same_box(zact, act_space):
         raise PolicySpaceError(f"{path}: the policy's action space {zact} does not match the expected normalised "
                                f"{act_space}")
-    return cls.load(str(path), env=env, device="cpu")
+    return cls.load(str(path), env=env, device="cpu", **(overrides or {}))
 
 
 def _algo_of_zip(path: Path) -> str:

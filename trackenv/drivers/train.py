@@ -3,6 +3,8 @@
     trackenv train j_turn --terrain dry_sand --algo ppo --seed 0          # configs/train/ppo.yaml
     trackenv train JTurn-v0 --terrain asphalt --algo sac --timesteps 20000 --out out/train/jt
     trackenv train j_turn --terrain dry_sand --algo ppo --resume          # from the latest checkpoint
+    trackenv train j_turn --config configs/train/ppo_plain_polish.yaml --init out/stage1/JTurn-v0-dry_sand.zip \
+        --out train/drivers/plain                                         # continue a trained driver
 
     from trackenv.drivers import load_config, train, load_policy
     cfg = load_config("ppo", "j_turn")                 # validated dict (RL Zoo style, trackenv.drivers.config)
@@ -16,7 +18,9 @@ time spent stepping the environment (:mod:`trackenv.drivers.wrappers`). Outputs 
 - ``<EnvName>-<terrain>.zip``: the final policy (SB3 zip);
 - ``<EnvName>-<terrain>.json``: task, terrain, algorithm, seed, the resolved config, timesteps, wall
   time [s], time in env.step / env.reset [s], the command that reproduces it, library versions; paths
-  inside the repository are written relative to it;
+  inside the repository are written relative to it. A run started with ``--init`` also records the
+  driver it continued (``init_from``, ``init_record``) and the totals over both (``total_train_seconds``,
+  ``total_timesteps``);
 - ``<EnvName>-<terrain>.curve.csv`` / ``.curve.png``: the learning curve (:mod:`trackenv.drivers.curves`);
 - ``checkpoints/``: ``rl_model_<steps>_steps.zip`` every ``checkpoint_freq`` steps (``--resume``
   continues from the latest one, the step counter included);
@@ -204,7 +208,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
           run_dir: str | Path | None = None, resume: bool = False,
           progress_bar: bool = True, tensorboard: bool = True, verbose: int = 0, threads: int = 1,
           command: str | None = None, randomize: bool = False, grounds: list[str] | tuple[str, ...] | None = None,
-          ) -> TrainResult:
+          init: str | Path | None = None) -> TrainResult:
     """Train a driver and save ``<out_dir>/<EnvName>-<terrain>.zip`` plus its ``.json`` record.
 
     ``randomize``: domain-randomised training, every episode on parameters drawn from the default ranges
@@ -213,6 +217,10 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     ``randomize``): a ground mixture instead, every episode on one of these terrains drawn first, then
     within its default ranges (``domain_randomization={"grounds": [...]}``); ``terrain`` still names the
     driver, its classical gains and its open-loop profile.
+
+    ``init``: a trained driver's zip to start from instead of a fresh policy (RL Zoo's ``--trained-agent``):
+    its weights, with this config's hyperparameters (``learning_rate`` ...), trained for ``n_timesteps``
+    more steps; it must be a driver of the same kind (residual or plain) and is never overwritten.
 
     Everything is validated (task, terrain, algorithm, config keys and values) before an environment
     is built. ``timesteps`` overrides the config's ``n_timesteps``; ``resume`` continues from the
@@ -241,6 +249,15 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     ckpt = latest_checkpoint(run) if resume else None
     if resume and ckpt is None:
         raise ConfigError(f"--resume: no checkpoint in {run / 'checkpoints'}")
+    if init is not None:
+        init = Path(init)
+        if resume:
+            raise ConfigError("--init starts a new run from a trained driver; --resume continues a run: not both")
+        if not init.is_file():
+            raise ConfigError(f"--init: no driver zip at {init}")
+        if init.resolve() == (out / f"{name}.zip").resolve():
+            raise ConfigError(f"--init: {init} is this run's output; train into another --out (the input is "
+                              "never overwritten)")
 
     import torch  # noqa: PLC0415
     from stable_baselines3.common.callbacks import CheckpointCallback  # noqa: PLC0415
@@ -276,15 +293,24 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         info_path = run / "progress.json"
         if info_path.is_file():
             previous = json.loads(info_path.read_text())
+    elif init is not None:
+        model = load_policy(init, task, terrain, env=venv, algo=algo, warn=False,
+                            overrides={**algo_kwargs(cfg), "tensorboard_log": tb, "verbose": verbose})
+        model.set_random_seed(int(seed))
+        was = float((getattr(model, "trackenv_driver", None) or {}).get("residual", 0.0))
+        if was != cfg["residual"]:
+            raise ConfigError(f"--init: {init} is a {'residual' if was else 'plain'} driver (residual {was}), the config "
+                              f"trains residual {cfg['residual']}")
+        driver_meta["init_from"] = repo_relative(init)
     else:
         model = algo_class(algo)(cfg["policy"], venv, policy_kwargs=policy_kwargs(cfg), seed=int(seed), device="cpu",
                                  tensorboard_log=tb, verbose=verbose, **algo_kwargs(cfg))
     imitate_seconds = 0.0  # counted in train_seconds
-    if cfg["imitate"] > 0 and ckpt is None:
+    if cfg["imitate"] > 0 and ckpt is None and init is None:
         t_bc = time.perf_counter()
         driver_meta["imitate"]["result"] = imitate_classical(model, venv, guided, cfg["imitate"])
         imitate_seconds = driver_meta["imitate"]["result"]["seconds"] = time.perf_counter() - t_bc
-    done_before = int(model.num_timesteps)
+    done_before = int(model.num_timesteps) if init is None else 0  # a driver continued with --init: a new run
     remaining = max(0, cfg["n_timesteps"] - done_before)
     checkpoints = CheckpointCallback(save_freq=max(1, cfg["checkpoint_freq"] // cfg["n_envs"]),
                                      save_path=str(run / "checkpoints"), name_prefix="rl_model")
@@ -310,14 +336,23 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         "train_seconds": wall + float(previous.get("train_seconds", 0.0)),
         "env_step_seconds": timer.step_seconds + timer.reset_seconds + float(previous.get("env_step_seconds", 0.0)),
         "resumed_from": repo_relative(ckpt) if ckpt else None, "driver_meta": driver_meta,
+        "init_from": repo_relative(init) if init is not None else None,
         "final_mean_return": float(np.mean([e["r"] for e in ep])) if ep else None,
         "final_success_rate": float(np.mean([e.get("is_success", 0.0) for e in ep])) if ep else None,
         "command": command or (f"trackenv train {env_name} --terrain {terrain} --algo {algo} --seed {seed}"
                                + (" --randomize" if randomize else "")
-                               + (f" --grounds {','.join(grounds)}" if grounds else "")),
+                               + (f" --grounds {','.join(grounds)}" if grounds else "")
+                               + (f" --init {repo_relative(init)}" if init is not None else "")),
         "versions": _versions(), "model_bytes": model_path.stat().st_size,
     }
     info["env_step_share"] = info["env_step_seconds"] / max(info["train_seconds"], 1e-9)
+    info["total_train_seconds"], info["total_timesteps"] = info["train_seconds"], info["n_timesteps"]
+    init_record = init.with_suffix(".json") if init is not None else None
+    if init_record is not None and init_record.is_file():  # the driver it continues, and its own stages
+        first = json.loads(init_record.read_text())
+        info["init_record"] = {k: first.get(k) for k in ("command", "train_seconds", "n_timesteps")}
+        info["total_train_seconds"] += float(first.get("total_train_seconds", first.get("train_seconds", 0.0)))
+        info["total_timesteps"] += int(first.get("total_timesteps", first.get("n_timesteps", 0)))
     write_curve(curve.rows, run_curve)
     curve_csv = write_curve(curve.rows, out / f"{name}.curve.csv")
     curve_png = curve_figure(curve.rows, f"{name} ({algo}{', guided' if guide_steps else ''}, seed {seed})",
