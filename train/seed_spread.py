@@ -107,7 +107,7 @@ def main(argv=None):
     OUT_MD.write_text("# Seed spread of the domain-randomised drivers\n\n"
                       "Written by `python train/seed_spread.py` (module docstring). Seed 0 is the shipped driver; the others\n"
                       "are retrained with the shipped config and evaluated on the same held-out conditions\n"
-                      "(train/README.md, \"Seed spread of the asphalt drivers\").\n\n"
+                      "(train/README.md, \"Seed spread of the randomised drivers\").\n\n"
                       + table(data))
     print(table(data))
 
