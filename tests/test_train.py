@@ -141,6 +141,9 @@ def test_ground_mixture_training_records_the_grounds(tmp_path):
                        "policy_kwargs": {"net_arch": [8]}, "env_kwargs": {"max_time": 0.5}}}
     with pytest.raises(ConfigError, match="randomize"):
         drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, config=cfg, grounds=["asphalt", "dry_sand"])
+    with pytest.raises(ConfigError, match="already set domain_randomization"):
+        drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, randomize=True, grounds=["dry_sand"],
+                      config={"default": {**cfg["default"], "env_kwargs": {"domain_randomization": True}}})
     with pytest.raises(ConfigError, match="unknown terrain 'moon'"):
         drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, config=cfg, randomize=True, grounds=["moon"])
     res = drivers.train("go_stop", "asphalt", "ppo", out_dir=tmp_path, progress_bar=False, tensorboard=False,

@@ -239,6 +239,9 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     check_budget(cfg, algo, where="--timesteps" if timesteps is not None else "n_timesteps")
     if grounds is not None and not randomize:
         raise ConfigError("grounds: a ground mixture is a domain randomisation; pass randomize=True (--randomize)")
+    if grounds is not None and "domain_randomization" in cfg["env_kwargs"]:
+        raise ConfigError("grounds: the config's env_kwargs already set domain_randomization; a ground mixture "
+                          "would be ignored")
     if randomize:
         cfg["env_kwargs"] = {**cfg["env_kwargs"]}
         cfg["env_kwargs"].setdefault("domain_randomization",
