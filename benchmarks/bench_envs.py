@@ -87,7 +87,7 @@ def main(argv=None):
     sizes = (1, 64) if args.quick else (64, 1024, 4096)
     secs = args.seconds / (2 if args.quick else 1)
     print(f"machine: {platform.processor() or platform.machine()}, {jax.device_count()} x {jax.devices()[0].device_kind} "
-          f"(vector envs split over them from {trackenv.parallel.MIN_PER_DEVICE} envs per device), "
+          f"(vector envs split over them from {trackenv.parallel.MIN_ENVS_PER_DEVICE} envs per device), "
           f"jax {jax.__version__}; float32; control_dt 0.05 s; go-stop on dry sand; default substep {DEFAULT_SUBSTEP * 1e3:g} ms; "
           f"{'synchronous' if args.sync_dispatch else 'asynchronous (default)'} CPU dispatch\n")
     print("Single env via gym.make (PassiveEnvChecker + OrderEnforcing wrappers included):\n")

@@ -1,5 +1,6 @@
 """Batches split across the host devices (trackenv.parallel) give the same trajectories as one device."""
 
+import importlib
 import os
 
 import jax
@@ -29,6 +30,18 @@ def test_split_count_rule(monkeypatch):
     assert parallel.split_count(n * m + 1) == 1  # does not divide evenly
 
 
+def _count_splits(monkeypatch) -> list:
+    """Record the batch size of every simulation that trackenv.simulate splits over the devices."""
+    sim = importlib.import_module("trackenv.simulate")  # the module (te.simulate is the function)
+    seen, shard = [], sim.shard
+
+    def counting(tree, batch, axis=-1, min_per_device=None):
+        seen.append(batch)
+        return shard(tree, batch, axis, min_per_device)
+    monkeypatch.setattr(sim, "shard", counting)
+    return seen
+
+
 def test_split_simulation_matches_one_device(monkeypatch):
     if len(parallel.cpu_devices()) < 2:
         pytest.skip("one host device")
@@ -38,15 +51,46 @@ def test_split_simulation_matches_one_device(monkeypatch):
     volts = rows[:, 1:, None] * np.linspace(0.8, 1.2, b)[None, None]
     prof = te.VoltageProfile.from_arrays(rows[:, 0], volts)
     params = te.replace(te.load_params("dry_sand"), **{"terrain.cohesion": np.linspace(500.0, 1500.0, b)})
+    placed = _count_splits(monkeypatch)
     split = te.simulate(params, prof, 1.0, substep=0.001)
-    assert len(split.channels["x"].sharding.device_set) == 2
+    assert placed == [b]  # split over the devices ...
+    assert len(split.channels["x"].sharding.device_set) == 1  # ... and gathered back onto one
     monkeypatch.setattr(parallel, "MIN_PER_DEVICE", 10**9)
     one = te.simulate(params, prof, 1.0, substep=0.001)
-    assert len(one.channels["x"].sharding.device_set) == 1
+    assert placed == [b]
     for k in ("speed_ideal", "yaw_rate", "i_left", "x", "y"):
         a, c = np.asarray(split.channels[k]), np.asarray(one.channels[k])
         assert np.abs(a[-1]).max() > 1e-3  # the vehicles moved
         np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-6 * np.abs(c).max())
+
+
+def test_diagnosis_batches_split_over_the_cores_with_an_odd_batch_padded(monkeypatch):
+    """The diagnosis's simulations (trackenv.simulate.simulate_on_cores) split an odd batch over the devices
+    by padding it with a copy of its last vehicle; the outputs are the unsplit batch's, padding dropped."""
+    from trackenv.compare import stack_trees
+    from trackenv.simulate import simulate_batch, simulate_on_cores
+    if len(parallel.cpu_devices()) < 2:
+        pytest.skip("one host device")
+    b = 5  # odd: not divisible over two devices
+    rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [0.8, 16, 6], [1.0, 0, 0]], float)
+    volts = rows[:, 1:, None] * np.linspace(0.8, 1.2, b)[None, None]
+    prof = te.VoltageProfile(jax.numpy.asarray(rows[:, 0], np.float32), jax.numpy.asarray(volts, np.float32))
+    base = te.load_params("dry_sand")
+    params = stack_trees([te.replace(base, **{"terrain.cohesion": c}) for c in np.linspace(500.0, 1500.0, b)])
+    monkeypatch.setattr(parallel, "MIN_PER_DEVICE", 2)
+    placed = _count_splits(monkeypatch)
+    traj = simulate_on_cores(params, prof, 50, 0.02, 20)
+    assert placed == [b + 1]  # padded to 6, three per device
+    assert traj.channels["x"].shape == (51, b) and traj.diverged.shape == (b,)
+    one = simulate_batch(params, prof, 50, 0.02, 20)
+    assert not np.asarray(traj.diverged).any()
+    for k in ("speed_ideal", "yaw_rate", "i_left", "x", "y"):
+        a, c = np.asarray(traj.channels[k]), np.asarray(one.channels[k])
+        assert np.abs(a[-1]).max() > 1e-3  # the vehicles moved
+        assert np.abs(a[-1, 0] - a[-1, -1]) > 1e-4  # and differently: a wrong column would show
+        np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-6 * np.abs(c).max())
+    for x, y in zip(jax.tree.leaves(traj.state), jax.tree.leaves(one.state)):
+        assert x.shape == y.shape
 
 
 def test_split_vector_env_matches_one_device(monkeypatch):
@@ -55,7 +99,7 @@ def test_split_vector_env_matches_one_device(monkeypatch):
     if len(parallel.cpu_devices()) < 2:
         pytest.skip("one host device")
     a = np.array([[11.8, 11.8], [6, 6], [20, 20], [0, 3]], np.float32)
-    for batching, threshold in (("vmap", "MIN_PER_DEVICE"), ("loop", "MIN_ROWS_PER_DEVICE")):
+    for batching, threshold in (("vmap", "MIN_ENVS_PER_DEVICE"), ("loop", "MIN_ROWS_PER_DEVICE")):
         out = {}
         for per in (2, 10**9):
             monkeypatch.setattr(parallel, threshold, per)

@@ -9,8 +9,11 @@ That flag is read once, when JAX initialises its backends. :func:`configure_host
 when ``trackenv`` is imported) therefore sets it only if the backends are not yet initialised and
 ``XLA_FLAGS`` does not set it already; importing trackenv *after* a first JAX computation leaves one
 device, and batches then run on one core (nothing else changes). ``TRACKENV_HOST_DEVICES=1`` opts out.
-Single vehicles and small batches stay on the default device (one core): splitting them costs more
-than it gains (:data:`MIN_PER_DEVICE`).
+Single vehicles stay on the default device (one core). A simulation batch is split from
+:data:`MIN_PER_DEVICE` vehicles per core (:func:`trackenv.simulate.simulate_on_cores`, which serves
+``simulate`` and the diagnosis's fits and gathers its outputs back onto the default device); the vector
+env's batched program, whose state stays split from one step to the next, from
+:data:`MIN_ENVS_PER_DEVICE` environments per core.
 
 A program that must compute every vehicle exactly as it computes one (the vector env's row loop,
 :mod:`trackenv.envs.rows`) is not partitioned by XLA but run as the same single-device program on each
@@ -36,7 +39,8 @@ from __future__ import annotations
 import os
 import re
 
-MIN_PER_DEVICE = 256  # vehicles per core below which a batch is not split (measured, README Performance)
+MIN_PER_DEVICE = 4  # vehicles per core below which a simulation batch is not split (measured, README Performance)
+MIN_ENVS_PER_DEVICE = 256  # the same for the vector env's batched program, whose state stays split between steps
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8
 SMALL_LOOP_BYTES = 400_000  # XLA's small-while-loop limit [bytes accessed by the loop] (measured, README)
@@ -112,9 +116,9 @@ def split_count(batch: int, min_per_device: int | None = None) -> int:
     return n
 
 
-def batch_sharding(ndim: int, axis: int, batch: int):
+def batch_sharding(ndim: int, axis: int, batch: int, min_per_device: int | None = None):
     """A ``NamedSharding`` splitting ``axis`` of an ``ndim``-array over the devices, or None."""
-    n = split_count(batch)
+    n = split_count(batch, min_per_device)
     if n == 1 or ndim == 0:
         return None
     import numpy as np
@@ -125,11 +129,11 @@ def batch_sharding(ndim: int, axis: int, batch: int):
     return NamedSharding(mesh, PartitionSpec(*spec))
 
 
-def shard(tree, batch: int, axis: int = -1):
+def shard(tree, batch: int, axis: int = -1, min_per_device: int | None = None):
     """Place every array leaf of ``tree`` whose ``axis`` has length ``batch`` split over the devices
-    (other leaves replicated); unchanged if the batch is not split."""
+    (other leaves replicated); unchanged if the batch is not split (``split_count(batch, min_per_device)``)."""
     import jax
-    n = split_count(batch)
+    n = split_count(batch, min_per_device)
     if n == 1:
         return tree
     import numpy as np
@@ -139,7 +143,7 @@ def shard(tree, batch: int, axis: int = -1):
     def put(x):
         x = jax.numpy.asarray(x)
         if x.ndim and x.shape[axis] == batch:
-            return jax.device_put(x, batch_sharding(x.ndim, axis, batch))
+            return jax.device_put(x, batch_sharding(x.ndim, axis, batch, min_per_device))
         return jax.device_put(x, NamedSharding(mesh, PartitionSpec()))
 
     return jax.tree.map(put, tree)

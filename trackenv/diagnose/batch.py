@@ -9,7 +9,7 @@ logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample ti
 interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
 and the pose is moved into the log's frame by its first pose sample: the rules of
 :mod:`trackenv.compare`, which :func:`trackenv.replay.replay` follows for one test. Each bucket is one
-call of :func:`trackenv.simulate.simulate_batch`; compiled programs are cached per (candidate, bucket
+call of :func:`trackenv.simulate.simulate_on_cores` (split over both cores); compiled programs are cached per (candidate, bucket
 shape), so every round of a fit reuses them.
 """
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from ..compare import POSE, SampleWeights, at_samples, grid_weights, pose_to_log_frame, rectify, stack_trees
 from ..params import load_params
-from ..simulate import SpeedProfile, VoltageProfile, simulate_batch
+from ..simulate import SpeedProfile, VoltageProfile, simulate_on_cores
 from .candidates import Candidate
 from .data import TestData
 
@@ -205,7 +205,7 @@ class BatchSimulator:
     def _simulate(self, b: Bucket, params, n_vehicles: int) -> tuple[dict, np.ndarray]:
         """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,)."""
         prof = b.profile(n_vehicles // len(b.tests), params.dtype)
-        traj = simulate_batch(params, prof, b.n_steps, b.dt, b.substeps)  # starts at rest, (n_vehicles,) batch
+        traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps)  # (n_vehicles,) batch, both cores
         self.n_vehicle_seconds += n_vehicles * b.n_steps * b.dt
         return {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}, np.asarray(traj.diverged)
 

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..compare import POSE, stack_trees, wrap_angle
-from ..simulate import simulate_batch
+from ..simulate import simulate_on_cores
 from .batch import predictions_at_log
 from .candidates import ON, Candidate
 from .metrics import signal_weight
@@ -122,7 +122,7 @@ class _Problem:
                     ch = eff.instruments(ch, t, params)
             else:
                 prof = b.profile(F, params.dtype)
-                traj = simulate_batch(params, prof, b.n_steps, b.dt, b.substeps)  # (nb * F,) vehicles
+                traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps)  # (nb * F,) vehicles
                 ch = dict(traj.channels)
                 if np.any(windows > 0):
                     win = jnp.asarray(np.tile(windows, nb), params.dtype)

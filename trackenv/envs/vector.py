@@ -224,11 +224,11 @@ class TrackVectorEnv(VectorEnv):
                 self._rows_shared, self._row_devices)
         elif mask is not None:
             n = self.num_envs  # large batches: one half per core
-            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, shard(seeds, n, 0), shard(mask, n, 0),
-                                                             self._pf, self._pi,
+            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, shard(seeds, n, 0, parallel.MIN_ENVS_PER_DEVICE),
+                                                             shard(mask, n, 0, parallel.MIN_ENVS_PER_DEVICE), self._pf, self._pi,
                                                              with_physics=self.info_state, final=self._final)
         else:
-            self._sf, self._si, packed = self._vreset(shard(seeds, self.num_envs, 0), self._pf, self._pi,
+            self._sf, self._si, packed = self._vreset(shard(seeds, self.num_envs, 0, parallel.MIN_ENVS_PER_DEVICE), self._pf, self._pi,
                                                       with_physics=self.info_state, final=self._final)
         host = np.array(packed)
         if mask is not None:  # environments that were not reset keep their last observation and info
@@ -264,7 +264,7 @@ class TrackVectorEnv(VectorEnv):
             self._sf, self._si, packed = run_split(self._step_rows, (self._sf, self._si, a),
                                                    (self._mode_index,) + self._rows_shared, self._row_devices)
         else:
-            self._sf, self._si, packed = self._vstep(self._sf, self._si, shard(a, self.num_envs, axis=0),
+            self._sf, self._si, packed = self._vstep(self._sf, self._si, shard(a, self.num_envs, 0, parallel.MIN_ENVS_PER_DEVICE),
                                                      self._pf, self._pi, mode=self._mode,
                                                      with_physics=self.info_state, final=self._final)
         host = np.array(packed)  # the one device-to-host transfer
