@@ -281,14 +281,13 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     The batch is padded with copies of its last vehicle to a multiple of the device count, its vehicle axis
     sharded (:func:`trackenv.parallel.shard`), and XLA partitions the simulation into one substep loop per
     core with no communication. The outputs are gathered back onto the default device with the padding
-    dropped, so that nothing split reaches later computations (a later jitted operation mixing split and
-    unsplit arrays would need cross-device collectives, which stalled XLA's CPU runtime when several were in
-    flight). The contact-point sums take their form from the whole batch's size (:mod:`trackenv.physics.sums`),
-    so a batch of at least ``UNROLL_MAX`` vehicles is padded to at least that many per core, out of the
-    size range where the reduce form is slow. Traced parameters (``jax.jit``, ``jax.jacfwd``) run unsplit.
-    The results equal the unsplit
-    batch's to float rounding (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split
-    (README, Performance).
+    dropped, so that nothing split reaches later computations: when the diagnosis kept split outputs, the
+    jitted operations that followed mixed split and unsplit arrays and XLA's CPU runtime stalled in a
+    cross-device all-reduce. The contact-point sums take their form from the whole batch's size
+    (:mod:`trackenv.physics.sums`), so a batch of at least ``UNROLL_MAX`` vehicles is padded to at least that
+    many per core, out of the size range where the reduce form is slow. Traced parameters (``jax.jit``,
+    ``jax.jacfwd``) run unsplit. The results equal the unsplit batch's to float rounding
+    (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (README, Performance).
     """
     kind = type(profile)
     batch = profile_values(profile).shape[2:]

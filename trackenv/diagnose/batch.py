@@ -9,8 +9,8 @@ logs at ≤ 100 Hz); the simulated channels are evaluated at the log's sample ti
 interpolation on the output grid, rectified (|i|) where ``meta.json`` says the ammeter is absolute,
 and the pose is moved into the log's frame by its first pose sample: the rules of
 :mod:`trackenv.compare`, which :func:`trackenv.replay.replay` follows for one test. Each bucket is one
-call of :func:`trackenv.simulate.simulate_on_cores` (split over both cores); compiled programs are cached per (candidate, bucket
-shape), so every round of a fit reuses them.
+call of :func:`trackenv.simulate.simulate_on_cores` (split over both cores); compiled programs are cached
+per (candidate, bucket shape), so every round of a fit reuses them.
 """
 
 from __future__ import annotations
