@@ -200,6 +200,11 @@ class TrackVectorEnv(VectorEnv):
             raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seed)}")
         return np.asarray([episode_seed(s) for s in seed], np.uint32)
 
+    def _on_cores(self, x):
+        """``x`` (num_envs, ...) split over the host devices for the batched program (one half per core from
+        ``MIN_ENVS_PER_DEVICE`` environments per core), else unchanged."""
+        return shard(x, self.num_envs, 0, parallel.MIN_ENVS_PER_DEVICE)
+
     def reset(self, *, seed=None, options: dict | None = None):
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
         options = dict(options or {})
@@ -223,12 +228,11 @@ class TrackVectorEnv(VectorEnv):
                 self._reset_rows, (sf, si, seeds, np.ones(self.num_envs, bool) if mask is None else mask),
                 self._rows_shared, self._row_devices)
         elif mask is not None:
-            n = self.num_envs  # large batches: one half per core
-            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, shard(seeds, n, 0, parallel.MIN_ENVS_PER_DEVICE),
-                                                             shard(mask, n, 0, parallel.MIN_ENVS_PER_DEVICE), self._pf, self._pi,
+            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, self._on_cores(seeds), self._on_cores(mask),
+                                                             self._pf, self._pi,
                                                              with_physics=self.info_state, final=self._final)
         else:
-            self._sf, self._si, packed = self._vreset(shard(seeds, self.num_envs, 0, parallel.MIN_ENVS_PER_DEVICE), self._pf, self._pi,
+            self._sf, self._si, packed = self._vreset(self._on_cores(seeds), self._pf, self._pi,
                                                       with_physics=self.info_state, final=self._final)
         host = np.array(packed)
         if mask is not None:  # environments that were not reset keep their last observation and info
@@ -264,7 +268,7 @@ class TrackVectorEnv(VectorEnv):
             self._sf, self._si, packed = run_split(self._step_rows, (self._sf, self._si, a),
                                                    (self._mode_index,) + self._rows_shared, self._row_devices)
         else:
-            self._sf, self._si, packed = self._vstep(self._sf, self._si, shard(a, self.num_envs, 0, parallel.MIN_ENVS_PER_DEVICE),
+            self._sf, self._si, packed = self._vstep(self._sf, self._si, self._on_cores(a),
                                                      self._pf, self._pi, mode=self._mode,
                                                      with_physics=self.info_state, final=self._final)
         host = np.array(packed)  # the one device-to-host transfer
