@@ -507,7 +507,7 @@ def test_cli_bad_folder_exits_2(tmp_path, capsys):
 # The withheld-effect check, small CI version (3 tests of at most 6 s, 8 search points, 1 cross-entropy round,
 # no polish). Threshold: at least 2 of these 3 blind cases (effects in forms the
 # candidate library does not have; labels withheld) get the right verdict, and the null case is not flagged.
-# The 40-case benchmark (top-1 0.675) is in docs/diagnose_benchmark.md.
+# The 40-case benchmark (top-1 0.775) is in docs/diagnose_benchmark.md.
 CI_LABELS = ["lateral_friction_radius", "slip_sinkage", "none"]
 
 
