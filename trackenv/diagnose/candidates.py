@@ -27,7 +27,9 @@ Ranges are the physically plausible ones (the effect classes' ``bounds`` are wid
   of its own, e.g. ``husky``, the reference is its drive's ``stiction_torque``), slopes s1 0-0.5, s2, s3 0-0.2 N m s/rad.
   The family holds the constant law (slopes 0), the viscous one (b0 = 0, equal slopes), speed-linear and
   convex (quadratic-like) or concave (a low-speed knee, tanh-like) laws;
-- ``grouser_stiction``: M0 0.5-30 N m, r_fade 0.1-5 rad/s, F0 0-60 N;
+- ``grouser_stiction``: M0 0.5-30 N m, r_fade 0.1-5 rad/s, F0 0-60 N, and the elements' lateral Stribeck
+  amplification β 0-1.5 fading over v_e 0.02-0.5 m/s (a body-level and an element-level form of the same
+  breakaway, fitted together);
 - ``pitch_load_transfer``: height factor 0-3, τ 0.01-0.5 s;
 - ``sensor_artifacts``: encoder window 0-1 s, gyro bias ±0.2 rad/s and scale factor ±0.3, ammeter zero
   offsets ±1.5 A per channel (ripple is not fitted: a ripple is indistinguishable from noise in an RMS
@@ -236,9 +238,12 @@ def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
                   "constant / viscous / convex / knee-shaped laws"),
         Candidate("grouser_stiction", (ParamSpec("yaw_moment", 0.5, 30.0, True, "N m"),
                                        ParamSpec("yaw_fade", 0.1, 5.0, True, "rad/s"),
-                                       ParamSpec("force", 0.0, 60.0, False, "N")),
-                  {"yaw_moment": 0.5, "yaw_fade": 1.5, "force": 0.0},
-                  "breakaway resistance of grousers on hard ground, fading with yaw/forward speed"),
+                                       ParamSpec("force", 0.0, 60.0, False, "N"),
+                                       ParamSpec("lateral_gain", 0.0, 1.5, False, "-"),
+                                       ParamSpec("lateral_slide_speed", 0.02, 0.5, True, "m/s")),
+                  {"yaw_moment": 0.5, "yaw_fade": 1.5, "force": 0.0, "lateral_gain": 0.0, "lateral_slide_speed": 0.1},
+                  "breakaway resistance of grousers on hard ground: a yaw moment and force fading with yaw/forward "
+                  "speed, and the elements' lateral force amplified while they slide slowly"),
         Candidate("pitch_load_transfer", (ParamSpec("height_factor", 0.0, 3.0, False, "x cg height"),
                                           ParamSpec("time_constant", 0.01, 0.5, True, "s")),
                   {"height_factor": 0.0, "time_constant": 0.05},
