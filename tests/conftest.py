@@ -1,10 +1,14 @@
-"""Test-wide setup: Hypothesis profiles (``ci`` by default, ``thorough`` with ``HYPOTHESIS_PROFILE=thorough``), and
-JAX's compiled programs released after each test module."""
+"""Test-wide setup: Hypothesis profiles (``ci`` by default, ``thorough`` with ``HYPOTHESIS_PROFILE=thorough``),
+JAX's compiled programs released after each test module, and the disk cache of compiled programs off."""
 
 import gc
 import os
 
 import pytest
+
+# the command line's disk cache of compiled programs stays off in tests (no writes to the user's home);
+# tests/test_compile_cache.py checks it with its own directories
+os.environ.setdefault("TRACKENV_COMPILATION_CACHE", "off")
 
 try:
     from hypothesis import HealthCheck, settings

@@ -388,9 +388,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    from trackenv.compile_cache import enable_compilation_cache
     from trackenv.params import ConfigError
     from trackenv.simulate import SimulationDiverged
 
+    enable_compilation_cache()  # compiled programs reused by the next command (trackenv/compile_cache.py)
     try:
         return args.func(args)
     except (ConfigError, SimulationDiverged, ValueError, KeyError) as exc:
