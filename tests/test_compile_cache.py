@@ -1,5 +1,6 @@
-"""The disk cache of compiled programs (trackenv/compile_cache.py): a second process reuses the first one's
-programs and gets the same numbers; the settings that choose or disable the directory are obeyed."""
+"""The disk cache of compiled programs (trackenv/compile_cache.py): the command line turns it on, a second
+process reuses the first one's programs and gets the same numbers, and the settings that choose or disable
+the directory are obeyed."""
 
 import json
 import os
@@ -79,3 +80,13 @@ def test_a_directory_that_cannot_be_made_warns_and_disables(tmp_path):
     path, msg = r.stdout.strip().split("|", 1)
     assert path.strip() == "None"
     assert "compilation cache disabled" in msg and str(blocker / "sub") in msg
+
+
+def test_the_command_line_turns_it_on(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR", "TRACKENV_COMPILATION_CACHE")}
+    env["TRACKENV_COMPILATION_CACHE"] = str(tmp_path / "cache")
+    env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"  # store it however fast this machine compiles
+    r = subprocess.run([sys.executable, "-m", "trackenv.cli", "simulate", "--voltages", "10,10", "--t-end", "1",
+                        "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert any(p.is_file() for p in (tmp_path / "cache").rglob("*")), "the simulation's program was not stored"
