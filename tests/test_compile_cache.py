@@ -28,10 +28,15 @@ print(json.dumps({"path": None if path is None else str(path), "hits": len(hits)
 """
 
 
-def run(env_extra, *args):
+def clean_env(extra):
+    """This process's environment without any cache setting, plus ``extra``."""
     env = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR", "TRACKENV_COMPILATION_CACHE")}
-    env.update(env_extra)
-    r = subprocess.run([sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, timeout=300, env=env)
+    return env | extra
+
+
+def run(env_extra, *args):
+    r = subprocess.run([sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, timeout=300,
+                       env=clean_env(env_extra))
     assert r.returncode == 0, r.stderr[-2000:]
     return json.loads(r.stdout.strip().splitlines()[-1])
 
@@ -68,8 +73,7 @@ def test_jax_setting_wins_and_default_lies_under_xdg_cache(tmp_path):
 def test_a_directory_that_cannot_be_made_warns_and_disables(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
-    env = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR", "TRACKENV_COMPILATION_CACHE")}
-    env["TRACKENV_COMPILATION_CACHE"] = str(blocker / "sub")
+    env = clean_env({"TRACKENV_COMPILATION_CACHE": str(blocker / "sub")})
     code = ("import warnings, trackenv as te\n"
             "with warnings.catch_warnings(record=True) as w:\n"
             "    warnings.simplefilter('always')\n"
@@ -83,9 +87,8 @@ def test_a_directory_that_cannot_be_made_warns_and_disables(tmp_path):
 
 
 def test_the_command_line_turns_it_on(tmp_path):
-    env = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR", "TRACKENV_COMPILATION_CACHE")}
-    env["TRACKENV_COMPILATION_CACHE"] = str(tmp_path / "cache")
-    env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"  # store it however fast this machine compiles
+    env = clean_env({"TRACKENV_COMPILATION_CACHE": str(tmp_path / "cache"),
+                     "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"})  # stored however fast this machine compiles
     r = subprocess.run([sys.executable, "-m", "trackenv.cli", "simulate", "--voltages", "10,10", "--t-end", "1",
                         "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=300, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
