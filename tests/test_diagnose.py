@@ -458,7 +458,7 @@ def test_base_model_plus_noise_gives_none(tmp_path):
 def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):
     """Logs of the base model + noise; the LM polish of ``recalibrate_base`` started off the truth (internal
     resistance factor 1.3 instead of 1) lowers the calibration loss through jax.jacfwd of the simulator, moves
-    back toward the truth, and says how it stopped."""
+    back toward the truth, says how it stopped, and counts its simulations."""
     from trackenv.diagnose.batch import BatchSimulator
     from trackenv.diagnose.fit import full_fold
     from trackenv.diagnose.polish import polish_folds
@@ -476,7 +476,11 @@ def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):
     assert info["end_loss"] <= info["start_loss"]
     assert info["grad_norm"] is not None and np.isfinite(info["grad_norm"])
     assert info["stop"] in ("small step", "small gradient", "small improvement", "iteration limit")
+    before = sim.n_vehicle_seconds
     res2 = polish_folds(sim, cand, [fd], [start], [None], [np.inf], iters=4)
+    # its simulations count in the report's vehicle-seconds (both tests are 5 s long: one bucket)
+    (b,) = sim.buckets
+    assert sim.n_vehicle_seconds - before == pytest.approx(res2["n_simulations"] * b.n_steps * b.dt)
     i2 = res2["info"][0]
     assert i2["end_loss"] < 0.8 * i2["start_loss"], i2  # from the wrong start the polish closes most of the way
     assert abs(res2["units"][0][0] - cand.anchor_unit()[0]) < abs(start[0] - cand.anchor_unit()[0])

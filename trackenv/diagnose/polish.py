@@ -168,6 +168,11 @@ class _Problem:
         # eager: the simulation inside is one jitted call whose JVP jax caches by shape
         fn = self._value_and_secant if jacobian == "secant" else self._value_and_jac
         r, J, pred = fn(jnp.asarray(z, jnp.float32))
+        # counted here, outside any trace, as :attr:`.batch.BatchSimulator.n_vehicle_seconds` counts the search's:
+        # the rows simulated (a forward-mode pass counts its p tangents too, as ``n_simulations`` does)
+        if not self.cand.instrument_only:
+            rows = z.shape[0] * (1 + (2 if jacobian == "secant" else 1) * z.shape[1])
+            self.sim.n_vehicle_seconds += rows * sum(len(b.tests) * b.n_steps * b.dt for b in self.sim.buckets)
         return np.asarray(r, np.float64), np.asarray(J, np.float64), pred
 
 
