@@ -443,6 +443,9 @@ def test_base_model_plus_noise_gives_none(tmp_path):
                  candidates=["internal_resistance", "slip_sinkage", "recalibrate_base", "sensor_artifacts"],
                  progress=False, rounds=1, polish_iters=2)
     assert d.verdict["effect"] == "none", d.verdict
+    checked = {c["fit"]: c for c in d.report["rounding_check"]}  # the verdict's references, each checked once
+    assert {"none", "recalibrate_base"} <= set(checked) and len(checked) == len(d.report["rounding_check"])
+    assert all(c["moved_fraction"] is not None for c in checked.values()), checked
     # no effect passes the rule; the gap test itself may find the small systematic difference between the logs'
     # 0.5 ms integration and the fit's 1 ms one (measured: one brake-phase current cell)
     # the polish ran and reports its convergence honestly; it never makes a fit worse
@@ -453,6 +456,32 @@ def test_base_model_plus_noise_gives_none(tmp_path):
                 assert info["polished_loss"] <= info["start_loss"] * 1.001 + 1e-9
     ins, ci = d.verdict["insample_gap_shrink"], d.verdict["insample_gap_shrink_ci"]
     assert ci[0] <= ins <= ci[1]
+
+
+def test_rounding_check_finds_the_stop_while_turning(tmp_path):
+    """The rounding check simulates one parameter set alone and as 16 copies: two batch layouts whose float
+    additions differ. The base model on a go-stop moves by rounding only (< 0.01 noise σ); the turn, whose
+    voltages drop to zero at 3.7 s while the vehicle is turning, moves by more (0.6 σ measured), and only
+    after that stop, where the stored lateral shear displacements spring back. Neither reaches the report's
+    1 σ."""
+    from types import SimpleNamespace
+
+    from trackenv.diagnose.batch import BatchSimulator
+    from trackenv.diagnose.sensitivity import rounding_check, summary_lines
+
+    tests, _ = load_tests(_base_case(tmp_path / "case", seed=6))
+    sim = BatchSimulator(tests)
+    cands = {c.name: c for c in candidate_set()}
+    fits = {n: SimpleNamespace(candidate=cands[n]) for n in ("none", "recalibrate_base")}
+    check = rounding_check(sim, tests, "none", fits)
+    assert check["moved_fraction"] == 0.0 and check["cells"] == [], check
+    assert 0.0 < check["max_sigma"] < 1.0, check
+    (line,) = summary_lines([check])
+    assert "`none`" in line and "same predictions" in line
+    fine = rounding_check(sim, tests, "none", fits, threshold=0.01)
+    assert fine["cells"] and {c["test"] for c in fine["cells"]} == {"turn"}, fine["cells"]
+    assert min(c["first_t"] for c in fine["cells"]) > 3.7, fine["cells"]
+    assert fine["max_sigma"] > 0.05, fine
 
 
 def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):

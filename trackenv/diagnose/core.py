@@ -39,6 +39,7 @@ from .metrics import (
     signal_weight,
     sq_errors,
 )
+from .sensitivity import rounding_checks
 from .stats import (
     ALPHA,
     block_draws,
@@ -571,6 +572,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     confidence = rule["confidence"] * flag_penalty(flags)
     line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags, rule.get("own_shrink"),
                         rule.get("gap_reference", NONE))
+    rounding = rounding_checks(sim, data, chosen_name, fits)
     rows = cell_table(data, base.full_pred, chosen.heldout_pred)
     cell_ci(data, rows, sq_base, sq_after, seed=seed)
     significant = rule["gap_significant"]
@@ -599,6 +601,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "converged": chosen.converged,
         },
         "ranking": ranking,
+        "rounding_check": rounding,
         "not_applicable": [{"effect": k, "why": v} for k, v in skipped.items()],
         "gap_cells": [{k: r[k] for k in ("test", "signal", "phase", "t_start", "t_end", "nrmse_before", "gap_before",
                                          "bias_before", "lag_before_s", "share_of_gap")} for r in carriers],

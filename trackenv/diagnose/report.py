@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .phases import phase_spans
+from .sensitivity import summary_lines
 
 SIGNAL_LABEL = {"i_left": "i_left [A]", "i_right": "i_right [A]", "speed_ideal": "speed_ideal [m/s]",
                 "yaw_rate": "yaw_rate [rad/s]", "x": "x [m]", "y": "y [m]", "heading": "heading [rad]"}
@@ -140,6 +141,8 @@ def write_report(diag, out: Path, figures: bool = True) -> dict:
           f"Base-model gap {v['gap_before']:.2f} noise units (held-out samples: {v['gap_before_heldout']:.2f}); "
           f"after `{v['after_model']}` (held out): {v['gap_after']:.2f}. Gap test p = {v['gap_test']['p']:.2g} "
           f"({v['gap_test']['cells']} test x signal cells). Rule: {rep['method']['rule']}"]
+    for line in summary_lines(rep.get("rounding_check", [])):
+        L += ["", line]
     L += ["", "## Where the gap lies", ""]
     if rep["gap_cells"]:
         L += ["| test | signal | phase | t [s] | NRMSE | systematic gap | bias | lag [s] | share |", "|---|---|---|---|---|---|---|---|---|"]  # noqa: E501
