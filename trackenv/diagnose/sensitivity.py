@@ -20,7 +20,7 @@ import numpy as np
 
 from ..compare import channel_error
 from .batch import BatchSimulator
-from .candidates import ON, RECALIBRATE
+from .candidates import NONE, ON, RECALIBRATE
 from .data import TestData
 from .fit import CandidateFit
 
@@ -90,33 +90,28 @@ def rounding_check(sim: BatchSimulator, data: list[TestData], name: str, fits: d
 def rounding_checks(sim: BatchSimulator, data: list[TestData], chosen: str, fits: dict) -> list[dict]:
     """:func:`rounding_check` of the fit the verdict names (or the best one) and of what it is compared
     against: the control and the base model (each once)."""
-    names = list(dict.fromkeys(n for n in (chosen, RECALIBRATE, "none") if n in fits))
+    names = list(dict.fromkeys(n for n in (chosen, RECALIBRATE, NONE) if n in fits))
     return [rounding_check(sim, data, n, fits) for n in names]
 
 
 def summary_lines(checks: list[dict]) -> list[str]:
-    """Sentences for report.md: one per checked fit with samples that moved, else one for all."""
-    moved = [c for c in checks if c.get("cells")]
-    if not moved:
-        ran = [c for c in checks if c.get("moved_fraction") is not None]
-        top = max((c["max_sigma"] for c in ran), default=None)
+    """Sentences for report.md: one per checked fit with samples that moved, else one for all the fits
+    checked; and one per check that could not run."""
+    lines = [_moved_line(c) for c in checks if c.get("cells")]
+    ran = [c for c in checks if c.get("moved_fraction") is not None]
+    if ran and not lines:
         fits = ", ".join("`" + c["fit"] + "`" for c in ran)
-        return [f"Rounding check: the fits {fits} give the same predictions, "
-                f"to {top:.2g} noise σ at most, when their parameters are simulated as {checks[0]['copies']} copies "
-                f"instead of alone (only the order of the float additions changes)."] if ran else []
-    return [summary_line(c) for c in moved]
+        lines.append(f"Rounding check: the fits {fits} give the same predictions, to "
+                     f"{max(c['max_sigma'] for c in ran):.2g} noise σ at most, when their parameters are simulated "
+                     f"as {ran[0]['copies']} copies instead of alone (only the order of the float additions changes).")
+    return lines + [f"Rounding check of `{c['fit']}`: not run ({c['note']})." for c in checks if c.get("note")]
 
 
-def summary_line(check: dict) -> str:
-    """One sentence for report.md."""
-    if check.get("moved_fraction") is None:
-        return "Rounding check: not run" + (f" ({check['note']})." if check.get("note") else ".")
-    head = (f"Rounding check: the `{check['fit']}` fit's parameters, simulated as {check['copies']} copies instead "
-            f"of alone (only the order of the float additions changes), move ")
-    if not check["cells"]:
-        return head + f"no compared sample by more than one noise σ (largest {check['max_sigma']:.2g} σ)."
+def _moved_line(check: dict) -> str:
     c = check["cells"][0]
-    return head + (f"{100 * check['moved_fraction']:.1f}% of the compared samples by more than one noise σ; the "
-                   f"largest, {c['max_sigma']:.0f} σ, in {c['test']} / {c['signal']} from t = {c['first_t']:.1f} s. "
-                   f"Those samples follow float rounding, not the parameters, so the fits' losses there are not "
-                   f"smooth (docs/diagnose_benchmark.md, \"Post-stop samples\").")
+    return (f"Rounding check: the `{check['fit']}` fit's parameters, simulated as {check['copies']} copies instead "
+            f"of alone (only the order of the float additions changes), move {100 * check['moved_fraction']:.1f}% "
+            f"of the compared samples by more than one noise σ; the largest, {c['max_sigma']:.0f} σ, in "
+            f"{c['test']} / {c['signal']} from t = {c['first_t']:.1f} s. Those samples follow float rounding, not "
+            f"the parameters, so the fits' losses there are not smooth (docs/diagnose_benchmark.md, "
+            f"\"Post-stop samples\").")
