@@ -484,6 +484,35 @@ def test_rounding_check_finds_the_stop_while_turning(tmp_path):
     assert fine["max_sigma"] > 0.05, fine
 
 
+def test_rounding_check_runs_on_a_family_with_its_own_state(tmp_path):
+    """The check simulates a fit's full-data point as (S,) = (1,) parameter values. A family with a state of
+    its own (the pitch load transfer's first-order lag, here on the fitted control) runs like the others,
+    and values of any other shape are refused by name, not sent into the simulator's loop."""
+    from types import SimpleNamespace
+
+    from trackenv.diagnose.batch import BatchSimulator
+    from trackenv.diagnose.candidates import ON
+    from trackenv.diagnose.sensitivity import rounding_check
+
+    tests, _ = load_tests(_base_case(tmp_path / "case", seed=6))
+    sim = BatchSimulator(tests)
+    cands = {c.name: c for c in candidate_set()}
+    recal = cands["recalibrate_base"]
+    pitch = cands["pitch_load_transfer"].standing_on(recal)
+    control = {"internal_resistance_factor": 1.1, "cohesion_factor": 0.9, "friction_angle_factor": 1.0,
+               "shear_modulus_factor": 1.2}
+    unit = pitch.anchor_unit(control)
+    unit[0] = 0.5  # height factor 1.5: a load transfer the lag acts on
+    fits = {"recalibrate_base": SimpleNamespace(candidate=recal, full=SimpleNamespace(params=control)),
+            "pitch_load_transfer": SimpleNamespace(candidate=pitch, full=SimpleNamespace(unit=unit, params={}))}
+    check = rounding_check(sim, tests, "pitch_load_transfer", fits)
+    assert "note" not in check and 0.0 <= check["moved_fraction"] <= 1.0 and np.isfinite(check["max_sigma"]), check
+    values = {k: np.array([[float(v[0])]]) for k, v in pitch.physical(unit[None]).items()}
+    values |= {ON + k: np.array([[v]]) for k, v in control.items()}
+    with pytest.raises(ValueError, match="pitch_load_transfer: parameter values must be"):
+        sim.run(pitch, values)
+
+
 def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):
     """Logs of the base model + noise; the LM polish of ``recalibrate_base`` started off the truth (internal
     resistance factor 1.3 instead of 1) lowers the calibration loss through jax.jacfwd of the simulator, moves

@@ -174,6 +174,9 @@ class BatchSimulator:
         return out, np.repeat(div, nw, axis=1)
 
     def _run(self, cand: Candidate, values: dict, progress=None) -> tuple[list[dict], np.ndarray]:
+        shapes = {k: np.shape(v) for k, v in values.items()}
+        if len(set(shapes.values())) > 1 or any(len(s) != 1 for s in shapes.values()):
+            raise ValueError(f"{cand.name}: parameter values must be (S,) arrays of one length S, got shapes {shapes}")
         S = len(next(iter(values.values()))) if values else 1
         self._speed_grid, self._grid_of = {}, {}
         pred: list[dict] = [None] * len(self.tests)
