@@ -36,7 +36,7 @@ def _values(fit: CandidateFit, fits: dict) -> tuple:
             return None, {}, ()
         cand = fits[RECALIBRATE].candidate
         return cand, {k: np.array([v], np.float64) for k, v in cand.anchor.items()}, ()
-    vals = {k: np.asarray(v, np.float64).reshape(1) for k, v in cand.physical(fit.full.unit[None]).items()}
+    vals = cand.physical(fit.full.unit[None])  # {name: (1,)}: one point of the unit cube
     if cand.on is not None:
         on = fits[cand.on.name].full.params
         vals |= {ON + s.name: np.array([on[s.name]], np.float64) for s in cand.on.specs}
