@@ -117,6 +117,29 @@ def test_split_vector_env_matches_one_device(monkeypatch):
             np.testing.assert_allclose(out[2][1], out[10**9][1], rtol=1e-5, atol=1e-5)
 
 
+def test_split_vector_env_sums_in_the_form_of_each_share(monkeypatch):
+    """160 environments split in two: the whole batch would sum in XLA's reduce form, each device's 80 in the
+    unrolled one (``sums.partitioned``); the split native program agrees with the one-device program."""
+    from trackenv.physics import sums
+
+    if len(parallel.cpu_devices()) < 2:
+        pytest.skip("one host device")
+    n = sums.UNROLL_MAX
+    assert not sums.unrolled(n) and sums.unrolled(n // 2)
+    a = np.tile(np.array([[11.8, 11.8], [16, 6]], np.float32), (n // 2, 1))
+    out = {}
+    for per in (n // 2, 10**9):
+        monkeypatch.setattr(parallel, "MIN_ENVS_PER_DEVICE", per)
+        venv = TrackVectorEnv("j_turn", n, autoreset_mode="same_step", substep=0.002, physics_batching="native")
+        venv.reset(seed=5)
+        for _ in range(3):
+            obs, rew, *_ = venv.step(a)
+        out[per] = (obs, rew, venv._parts, jax.tree.leaves(venv._sf)[0].sharding.device_set)
+    assert out[n // 2][2] == 2 and len(out[n // 2][3]) == 2 and out[10**9][2] == 1
+    np.testing.assert_allclose(out[n // 2][0], out[10**9][0], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(out[n // 2][1], out[10**9][1], rtol=1e-5, atol=1e-5)
+
+
 def _simulate_script(out):
     return ("import numpy as np, trackenv as te\n"
             "rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [1.0, 16, 6], [1.5, 0, 0], [2.0, 0, 0]], float)\n"

@@ -40,7 +40,7 @@ import os
 import re
 
 MIN_PER_DEVICE = 4  # vehicles per core below which a simulation batch is not split (measured, README Performance)
-MIN_ENVS_PER_DEVICE = 256  # the same for the vector env's batched program, whose state stays split between steps
+MIN_ENVS_PER_DEVICE = 128  # the same for the vector env's batched program, whose state stays split between steps (measured, README)
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8
 SMALL_LOOP_BYTES = 400_000  # XLA's small-while-loop limit [bytes accessed by the loop] (measured, README)

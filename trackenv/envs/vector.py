@@ -28,7 +28,8 @@ an (N, K) float32 array::
 - ``"vmap"`` (plain ``jax.vmap`` of the integrator), ``"native"`` (the vmapped step hands the physics
   to the integrator with the batch on the *last* axis of every array, docs/model.md §6, through
   ``jax.custom_batching.custom_vmap``) or ``"auto"`` (vmap below 256 environments, native from 256,
-  split over the host devices from 256 per device): one batched program, 1.3-2.9x the throughput of
+  split over the host devices from ``parallel.MIN_ENVS_PER_DEVICE`` = 128 per device, traced with the
+  contact sums' form for one device's share, :func:`trackenv.physics.sums.partitioned`): one batched program, 1.3-2.9x the throughput of
   ``"loop"`` from 64 environments (README Performance), but XLA compiles its float32 arithmetic
   differently for each batch shape, so a sub-environment only agrees with the single env to rounding
   (~1e-7 after one step, growing to ~1-3 % of a channel's range within 1.5 s; README Reliability).
@@ -62,6 +63,7 @@ from gymnasium.vector.utils import batch_space
 
 from .. import parallel
 from ..parallel import run_split, shard
+from ..physics import sums
 from . import core, rows
 from .core import ENV_DEFAULT_SUBSTEP
 from .flat import FlatCodec, codecs
@@ -96,15 +98,16 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
         sf, si = scodec.ravel(state)
         return sf, si, core.pack(state, out, params, with_physics=with_physics, final=out if final else None)
 
-    def vreset(seeds, pf, pi, with_physics, final):
+    def vreset(seeds, pf, pi, with_physics, final, parts):
         params = pcodec.unravel(pf, pi)
-        return jax.vmap(lambda s: one_reset(s, params, with_physics, final))(seeds)
+        with sums.partitioned(parts):  # trace-time: the contact sums' form for one device's share
+            return jax.vmap(lambda s: one_reset(s, params, with_physics, final))(seeds)
 
-    def vreset_masked(sf, si, seeds, mask, pf, pi, with_physics, final):
-        nf, ni, packed = vreset(seeds, pf, pi, with_physics, final)
+    def vreset_masked(sf, si, seeds, mask, pf, pi, with_physics, final, parts):
+        nf, ni, packed = vreset(seeds, pf, pi, with_physics, final, parts)
         return jnp.where(mask[:, None], nf, sf), jnp.where(mask[:, None], ni, si), packed
 
-    def vstep(sf, si, actions, pf, pi, mode, with_physics, final):
+    def vstep(sf, si, actions, pf, pi, mode, with_physics, final, parts):
         params = pcodec.unravel(pf, pi)
 
         def one(f, i, a):
@@ -112,11 +115,12 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
             f, i = scodec.ravel(state)
             return f, i, core.pack(state, out, params, with_physics=with_physics, final=fin if final else None)
 
-        return jax.vmap(one)(sf, si, actions)
+        with sums.partitioned(parts):
+            return jax.vmap(one)(sf, si, actions)
 
-    fns = (jax.jit(vreset, static_argnames=("with_physics", "final")),
-           jax.jit(vreset_masked, static_argnames=("with_physics", "final")),
-           jax.jit(vstep, static_argnames=("mode", "with_physics", "final")))
+    fns = (jax.jit(vreset, static_argnames=("with_physics", "final", "parts")),
+           jax.jit(vreset_masked, static_argnames=("with_physics", "final", "parts")),
+           jax.jit(vstep, static_argnames=("mode", "with_physics", "final", "parts")))
     _FNS[key] = fns
     return fns
 
@@ -171,6 +175,7 @@ class TrackVectorEnv(VectorEnv):
             self._mode_index = rows.mode_index(self._mode)
         else:
             self._vreset, self._vreset_masked, self._vstep = jitted(self._scodec, self._pcodec)
+            self._parts = parallel.split_count(self.num_envs, parallel.MIN_ENVS_PER_DEVICE)  # = self._on_cores's split
         self._sf = self._si = None
         self._last_host = None
         example = self._scodec.unravel_host(np.zeros(self._scodec.n_float, np.float32), np.zeros(self._scodec.n_int, np.int32))
@@ -230,10 +235,10 @@ class TrackVectorEnv(VectorEnv):
         elif mask is not None:
             self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, self._on_cores(seeds), self._on_cores(mask),
                                                              self._pf, self._pi,
-                                                             with_physics=self.info_state, final=self._final)
+                                                             with_physics=self.info_state, final=self._final, parts=self._parts)
         else:
             self._sf, self._si, packed = self._vreset(self._on_cores(seeds), self._pf, self._pi,
-                                                      with_physics=self.info_state, final=self._final)
+                                                      with_physics=self.info_state, final=self._final, parts=self._parts)
         host = np.array(packed)
         if mask is not None:  # environments that were not reset keep their last observation and info
             host = np.where(mask[:, None], host, self._last_host)
@@ -270,7 +275,7 @@ class TrackVectorEnv(VectorEnv):
         else:
             self._sf, self._si, packed = self._vstep(self._sf, self._si, self._on_cores(a),
                                                      self._pf, self._pi, mode=self._mode,
-                                                     with_physics=self.info_state, final=self._final)
+                                                     with_physics=self.info_state, final=self._final, parts=self._parts)
         host = np.array(packed)  # the one device-to-host transfer
         self._last_host = host
         lay = self._layout

@@ -15,11 +15,19 @@ integrator's damping. :func:`contact_sum` computes ``a.sum(axes)`` in one of two
   :data:`UNROLL_MIN` vehicles it is slower (measured the same way).
 
 The two forms add in different orders, so they agree to rounding (float32: ~1e-7 relative), not bit
-for bit; the form depends only on the batch size, so one batch shape always computes the same way.
+for bit; the form depends only on the batch size (and the split, below), so one batch shape always computes the
+same way.
+
+A program that XLA partitions over the host devices (the vector env's batched program, split by
+:func:`trackenv.parallel.shard`) is traced with the whole batch's shape, but each device computes its own
+share. Traced inside :func:`partitioned` ``(n)``, :func:`contact_sum` picks the form for ``batch / n``
+vehicles, the size each device runs (README Performance, "Both cores").
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 
 import jax.numpy as jnp
@@ -27,6 +35,20 @@ from jaxtyping import Array, Float
 
 UNROLL_MIN = 16  # vehicles: from here the unrolled form is the faster (measured, module docstring)
 UNROLL_MAX = 160  # vehicles: from here XLA's CPU backend runs the reductions as YNNPACK kernels
+
+
+_PARTS = contextvars.ContextVar("contact_sum_parts", default=1)
+
+
+@contextlib.contextmanager
+def partitioned(parts: int):
+    """While tracing inside this context, :func:`contact_sum` chooses its form for a batch split into ``parts``
+    equal shares (one per device), not for the whole batch."""
+    token = _PARTS.set(max(1, int(parts)))
+    try:
+        yield
+    finally:
+        _PARTS.reset(token)
 
 
 def unrolled(batch: int) -> bool:
@@ -38,7 +60,7 @@ def contact_sum(a: Float[Array, " ..."], axes: int | tuple[int, ...], nb: int) -
     """``a.sum(axes)`` over small leading axes (tracks, contact points) of an array with ``nb`` trailing
     batch axes (the vehicles), in the faster form for its batch size (module docstring)."""
     axes = (axes,) if isinstance(axes, int) else tuple(axes)
-    batch = math.prod(a.shape[a.ndim - nb:]) if nb else 1
+    batch = -(-math.prod(a.shape[a.ndim - nb:]) // _PARTS.get()) if nb else 1  # one device's share
     if not unrolled(batch):
         return jnp.sum(a, axis=axes)
     for ax in sorted((ax % a.ndim for ax in axes), reverse=True):  # the highest first: lower indices stay valid
