@@ -119,7 +119,7 @@ def test_split_vector_env_matches_one_device(monkeypatch):
 
 def test_split_vector_env_sums_in_the_form_of_each_share(monkeypatch):
     """160 environments split in two: the whole batch would sum in XLA's reduce form, each device's 80 in the
-    unrolled one (``sums.partitioned``); the split native program agrees with the one-device program."""
+    unrolled one (``sums.Partitioned``); the split native program agrees with the one-device program."""
     from trackenv.physics import sums
 
     if len(parallel.cpu_devices()) < 2:

@@ -51,8 +51,8 @@ def test_unrolled_batch_matches_single_vehicles():
             assert np.max(np.abs(a - b)) <= 1e-3 * max(np.max(np.abs(b)), 1e-3), (k, ch)
 
 
-def test_partitioned_chooses_the_form_for_one_devices_share():
-    """Traced inside ``partitioned(n)`` (a program XLA splits over n devices), the form is the one for each
+def test_partitioned_trace_chooses_the_form_for_one_devices_share():
+    """Traced inside ``Partitioned(n)`` (a program XLA splits over n devices), the form is the one for each
     device's batch / n vehicles: 256 vehicles sum with XLA's reduce, two shares of 128 unrolled."""
     a = jnp.zeros((2, 14, 2 * (sums.UNROLL_MAX - 32)), jnp.float32)  # 256 vehicles: each half in the unrolled range
 
@@ -61,8 +61,8 @@ def test_partitioned_chooses_the_form_for_one_devices_share():
         return {e.primitive.name for e in jaxpr.jaxpr.eqns}
 
     assert "reduce_sum" in primitives()
-    with sums.partitioned(2):
+    with sums.Partitioned(2):
         assert "reduce_sum" not in primitives()
-        with sums.partitioned(1):  # nested: the inner one holds
+        with sums.Partitioned(1):  # nested: the inner one holds
             assert "reduce_sum" in primitives()
     assert "reduce_sum" in primitives()  # restored on leaving

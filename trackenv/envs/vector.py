@@ -29,7 +29,7 @@ an (N, K) float32 array::
   to the integrator with the batch on the *last* axis of every array, docs/model.md §6, through
   ``jax.custom_batching.custom_vmap``) or ``"auto"`` (vmap below 256 environments, native from 256,
   split over the host devices from ``parallel.MIN_ENVS_PER_DEVICE`` = 128 per device, traced with the
-  contact sums' form for one device's share, :func:`trackenv.physics.sums.partitioned`): one batched program, 1.3-2.9x the throughput of
+  contact sums' form for one device's share, :class:`trackenv.physics.sums.Partitioned`): one batched program, 1.3-2.9x the throughput of
   ``"loop"`` from 64 environments (README Performance), but XLA compiles its float32 arithmetic
   differently for each batch shape, so a sub-environment only agrees with the single env to rounding
   (~1e-7 after one step, growing to ~1-3 % of a channel's range within 1.5 s; README Reliability).
@@ -100,7 +100,7 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
 
     def vreset(seeds, pf, pi, with_physics, final, parts):
         params = pcodec.unravel(pf, pi)
-        with sums.partitioned(parts):  # trace-time: the contact sums' form for one device's share
+        with sums.Partitioned(parts):  # trace-time: the contact sums' form for one device's share
             return jax.vmap(lambda s: one_reset(s, params, with_physics, final))(seeds)
 
     def vreset_masked(sf, si, seeds, mask, pf, pi, with_physics, final, parts):
@@ -115,7 +115,7 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
             f, i = scodec.ravel(state)
             return f, i, core.pack(state, out, params, with_physics=with_physics, final=fin if final else None)
 
-        with sums.partitioned(parts):
+        with sums.Partitioned(parts):
             return jax.vmap(one)(sf, si, actions)
 
     fns = (jax.jit(vreset, static_argnames=("with_physics", "final", "parts")),

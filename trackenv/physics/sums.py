@@ -20,13 +20,12 @@ same way.
 
 A program that XLA partitions over the host devices (the vector env's batched program, split by
 :func:`trackenv.parallel.shard`) is traced with the whole batch's shape, but each device computes its own
-share. Traced inside :func:`partitioned` ``(n)``, :func:`contact_sum` picks the form for ``batch / n``
+share. Traced inside :class:`Partitioned` ``(n)``, :func:`contact_sum` picks the form for ``batch / n``
 vehicles, the size each device runs (README Performance, "Both cores").
 """
 
 from __future__ import annotations
 
-import contextlib
 import contextvars
 import math
 
@@ -40,15 +39,20 @@ UNROLL_MAX = 160  # vehicles: from here XLA's CPU backend runs the reductions as
 _PARTS = contextvars.ContextVar("contact_sum_parts", default=1)
 
 
-@contextlib.contextmanager
-def partitioned(parts: int):
-    """While tracing inside this context, :func:`contact_sum` chooses its form for a batch split into ``parts``
-    equal shares (one per device), not for the whole batch."""
-    token = _PARTS.set(max(1, int(parts)))
-    try:
-        yield
-    finally:
-        _PARTS.reset(token)
+class Partitioned:
+    """Context manager: while a program is traced inside ``with Partitioned(parts):``, :func:`contact_sum`
+    chooses its form for a batch split into ``parts`` equal shares (one per device), not for the whole
+    batch. Nested contexts: the innermost holds."""
+
+    def __init__(self, parts: int) -> None:
+        self.parts = max(1, int(parts))
+        self._token = None
+
+    def __enter__(self) -> None:
+        self._token = _PARTS.set(self.parts)
+
+    def __exit__(self, *exc) -> None:
+        _PARTS.reset(self._token)
 
 
 def unrolled(batch: int) -> bool:
