@@ -26,13 +26,12 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 torch.set_num_threads(1)
 
+from trackenv import parallel  # noqa: E402
 from trackenv.drivers import load_config, train  # noqa: E402
 
 
 def _run(a, n, min_envs_per_device):
     import pandas as pd  # noqa: PLC0415
-
-    from trackenv import parallel  # noqa: PLC0415
 
     default = parallel.MIN_ENVS_PER_DEVICE
     parallel.MIN_ENVS_PER_DEVICE = min_envs_per_device
@@ -61,8 +60,6 @@ def main():
     ap.add_argument("--compare-split", action="store_true",
                     help="also run each batch on one device, interleaved with the default (one process)")
     a = ap.parse_args()
-    from trackenv import parallel
-
     print("| n_envs | vector env | steps | wall s | env s | env share | steps/s | steady steps/s |")
     print("|---|---|---|---|---|---|---|---|")
     for n in a.n_envs:

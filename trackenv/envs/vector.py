@@ -175,7 +175,8 @@ class TrackVectorEnv(VectorEnv):
             self._mode_index = rows.mode_index(self._mode)
         else:
             self._vreset, self._vreset_masked, self._vstep = jitted(self._scodec, self._pcodec)
-            self._parts = parallel.split_count(self.num_envs, parallel.MIN_ENVS_PER_DEVICE)  # = self._on_cores's split
+            self._split_from = parallel.MIN_ENVS_PER_DEVICE  # read once: the split and the traced sums agree
+            self._parts = parallel.split_count(self.num_envs, self._split_from)
         self._sf = self._si = None
         self._last_host = None
         example = self._scodec.unravel_host(np.zeros(self._scodec.n_float, np.float32), np.zeros(self._scodec.n_int, np.int32))
@@ -208,7 +209,7 @@ class TrackVectorEnv(VectorEnv):
     def _on_cores(self, x):
         """``x`` (num_envs, ...) split over the host devices for the batched program (one half per core from
         ``MIN_ENVS_PER_DEVICE`` environments per core), else unchanged."""
-        return shard(x, self.num_envs, 0, parallel.MIN_ENVS_PER_DEVICE)
+        return shard(x, self.num_envs, 0, self._split_from)
 
     def reset(self, *, seed=None, options: dict | None = None):
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
