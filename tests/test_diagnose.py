@@ -291,6 +291,29 @@ def test_an_effect_on_the_base_is_named_where_its_fit_on_the_control_inherits_a_
     assert v["effect"] == "sensor_artifacts" and v["member"] == "sensor_artifacts@base", v
 
 
+def test_a_physical_effect_that_predicts_better_does_not_hand_the_verdict_to_the_instruments():
+    """A physical effect and the instruments alone remove the same bias; the instruments' prediction also
+    carries a small zero-mean wiggle, so it scores worse, yet the paired test cannot separate the two. Neither
+    is named (condition 4: the data do not separate them). With the wiggle on the physical effect instead,
+    the instruments alone predict at least as well and are named."""
+    from trackenv.diagnose.core import decide
+
+    rng = np.random.default_rng(3)
+    K, sigma = 3000, 0.1
+    n = sigma * rng.standard_normal(K)
+    wiggle = 0.002 * np.where(np.arange(K) % 2 == 0, 1.0, -1.0)
+    errors = {"none": 0.1 + n, "recalibrate_base": 0.1 + n, "internal_resistance": 0.02 + n,
+              "sensor_artifacts": 0.02 + wiggle + n}
+    v = decide(_evidence(errors, sigma))
+    assert v["tests"]["internal_resistance vs sensor_artifacts"] >= 0.05  # not separated ...
+    assert v["tests"]["sensor_artifacts vs none"] < 0.05  # ... though the instruments alone pass (2)-(3)
+    assert v["best"] == "internal_resistance"
+    assert v["effect"] == "none" and "do not separate" in v["reason"], v
+    errors["internal_resistance"], errors["sensor_artifacts"] = errors["sensor_artifacts"], errors["internal_resistance"]
+    v = decide(_evidence(errors, sigma))
+    assert v["effect"] == "sensor_artifacts", v
+
+
 def test_the_shrink_threshold_counts_only_what_the_effect_adds_to_the_control():
     """The control closes most of the gap; an effect on top of it that adds a tiny but systematic improvement
     passes the significance tests, yet is not named: it closes < 10% of the gap the control leaves."""

@@ -88,7 +88,9 @@ def test_diagnosis_batches_split_over_the_cores_with_an_odd_batch_padded(monkeyp
         a, c = np.asarray(traj.channels[k]), np.asarray(one.channels[k])
         assert np.abs(a[-1]).max() > 1e-3  # the vehicles moved
         assert np.abs(a[-1, 0] - a[-1, -1]) > 1e-4  # and differently: a wrong column would show
-        np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-6 * np.abs(c).max())
+        # 3 vehicles per device against 5 on one: programs of other widths, float32 rounding of ~1e-6 of the
+        # channel's peak at the stop; a wrong or shifted column differs by more than 1e-4 (above)
+        np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-5 * np.abs(c).max())
     for x, y in zip(jax.tree.leaves(traj.state), jax.tree.leaves(one.state)):
         assert x.shape == y.shape
 

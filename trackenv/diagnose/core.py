@@ -77,10 +77,13 @@ RULE_TEXT = (
     "a Diebold-Mariano test (Newey-West variance, bandwidth >= 2 correlation times of the loss differential, "
     "p < alpha), else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
-    "itself passes (2)-(3); (5) it closes at least 10% of the held-out gap that the better of `none` and "
+    "itself passes (2)-(3) and predicts the held-out data at least as well (held-out score); if it predicts them "
+    "worse, the data do not separate the two and neither is named; (5) it closes at least 10% of the held-out "
+    "gap that the better of `none` and "
     "`recalibrate_base` leaves (its own part: the shrink reported beside it counts from the base model and includes "
     "what the control closes). If no physical effect passes, `sensor_artifacts` is named if it passes "
-    "(2), (3) and (5). Otherwise `none`, with the reason of the "
+    "(2), (3) and (5) and no physical effect was left unseparated from it by (4). Otherwise `none`, with the "
+    "reason of the "
     "best-scoring effect. "
     "Confidence: 1 - (largest corrected p-value the named effect had to pass); for `none`, the smallest such "
     "value of any effect; times 0.7 for a single test, 0.5 when a control was not fitted, 0.8 when the fit did "
@@ -287,6 +290,8 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
 
     out["gap_reference"] = ref
 
+    tied = []  # physical fits that pass (2)-(3) and score better than the instruments alone, not separated from them
+
     def judge(e):
         """(named effect, ok, p_used, why) for physical effect ``e`` (or the instruments alone)."""
         ok, p_used, why = passes(e)
@@ -294,11 +299,15 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
             ps = p_of(e, sensor, physical)
             if ps >= alpha:
                 ok_s, p_s, _ = passes(sensor)
-                if ok_s:
+                if ok_s and score[sensor] <= score[e] and not tied:
                     e, ok, p_used, why = sensor, True, p_s, ""
                 elif ok:
+                    if ok_s:
+                        tied.append(e)
                     ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; "
-                                                  f"p = {ps:.2g} ≥ {alpha:.2g})")
+                                                  f"p = {ps:.2g} ≥ {alpha:.2g})" + (
+                                                      ", which predict the held-out data worse: the data do not "
+                                                      "separate the two" if ok_s else ""))
             else:
                 p_used = max(p_used, ps)
         if ok and own_shrink(e) < min_shrink:
@@ -318,7 +327,7 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
                     "confidence": max(0.0, 1.0 - p_used), "p_used": p_used, "own_shrink": own_shrink(e)}
     if sensor is not None and physical:
         ok_s, p_s, _ = passes(sensor)
-        if ok_s and score[sensor] < score[NONE] and own_shrink(sensor) >= min_shrink:
+        if ok_s and not tied and score[sensor] < score[NONE] and own_shrink(sensor) >= min_shrink:
             return {**out, "effect": SENSOR, "member": sensor, "reason": "passes the tests of the rule",
                     "confidence": max(0.0, 1.0 - p_s), "p_used": p_s, "own_shrink": own_shrink(sensor)}
     # none: confidence = how far the strongest effect was from passing
