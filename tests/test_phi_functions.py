@@ -7,6 +7,7 @@ between them, over the whole range of decay rates a substep meets (0 to 1e6 per 
 
 from __future__ import annotations
 
+import math
 from decimal import Decimal, getcontext
 
 import jax
@@ -22,16 +23,9 @@ getcontext().Emin = -999_999_999
 
 def _phi(k: int, z: Decimal) -> Decimal:
     if z == 0:
-        return 1 / _fact(k)
-    head = sum((z**j / _fact(j) for j in range(k)), Decimal(0))
+        return 1 / Decimal(math.factorial(k))
+    head = sum((z**j / math.factorial(j) for j in range(k)), Decimal(0))
     return (z.exp() - head) / z**k
-
-
-def _fact(n: int) -> Decimal:
-    out = Decimal(1)
-    for i in range(2, n + 1):
-        out *= i
-    return out
 
 
 def reference(z: float) -> np.ndarray:

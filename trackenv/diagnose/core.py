@@ -299,15 +299,16 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
             ps = p_of(e, sensor, physical)
             if ps >= alpha:
                 ok_s, p_s, _ = passes(sensor)
-                if ok_s and score[sensor] <= score[e] and not tied:
+                sensor_worse = ok_s and score[sensor] > score[e]
+                if ok_s and not sensor_worse and not tied:
                     e, ok, p_used, why = sensor, True, p_s, ""
                 elif ok:
-                    if ok_s:
+                    if sensor_worse:
                         tied.append(e)
                     ok, p_used, why = False, ps, (f"{e} does not beat the instruments alone (sensor_artifacts; "
                                                   f"p = {ps:.2g} ≥ {alpha:.2g})" + (
                                                       ", which predict the held-out data worse: the data do not "
-                                                      "separate the two" if ok_s else ""))
+                                                      "separate the two" if sensor_worse else ""))
             else:
                 p_used = max(p_used, ps)
         if ok and own_shrink(e) < min_shrink:
