@@ -18,7 +18,9 @@ Prints Markdown tables for the README, every number from this one process run:
   emission off, ``trackenv.parallel``), and the speed-up of the default over it (``--one`` prints only
   the one-trajectory line, the form that process runs);
 - the two forms of the contact-point sums (``trackenv.physics.sums``: XLA's ``reduce`` and unrolled
-  additions) per batch size, each compiled and timed in this process (``--sums`` prints only that table).
+  additions) per batch size, each compiled and timed in this process (``--sums`` prints only that table);
+- the cost per element of the transcendental functions on the model's element arrays (``--ops`` prints
+  only that table): XLA's CPU ``pow`` is not vectorised, and on one vehicle's arrays nothing is.
 """
 
 from __future__ import annotations
@@ -124,6 +126,33 @@ def sum_forms(params, batches, n_steps: int = 20, repeat: int = 7) -> None:
         sums.UNROLL_MIN, sums.UNROLL_MAX = keep
 
 
+def elementwise_ops(shapes=((2, 14), (2, 14, 256)), n_loop: int = 2000, repeat: int = 5) -> None:
+    """Table: ns per element of the transcendental functions the substep uses, on the model's element
+    arrays (one vehicle, 256 vehicles), each in a jitted loop of ``n_loop`` dependent evaluations."""
+    ops = {
+        "identity (loop overhead)": lambda v: v,
+        "exp": jnp.exp,
+        "log": jnp.log,
+        "exp(a log x)": lambda v: jnp.exp(1.9 * jnp.log(v)),
+        "x ** a (pow)": lambda v: v ** 1.9,
+        "expm1": jnp.expm1,
+        "tanh": jnp.tanh,
+        "sin": jnp.sin,
+    }
+    print("| function | " + " | ".join(f"ns / element, {s}" for s in shapes) + " |")
+    print("|---|" + "---|" * len(shapes))
+    rng = np.random.default_rng(0)
+    rows = {name: [] for name in ops}
+    for shape in shapes:
+        x = jnp.asarray(rng.uniform(0.1, 2.0, shape).astype(np.float32))
+        for name, f in ops.items():
+            loop = jax.jit(lambda x, f=f: jax.lax.fori_loop(0, n_loop, lambda _, c: c + 1e-6 * f(1e-3 * c + x), x))
+            w = timed(lambda: loop(x), repeat)
+            rows[name].append(w / n_loop / x.size * 1e9)
+    for name, vals in rows.items():
+        print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in vals) + " |")
+
+
 def scipy_seconds(params, t_end: float) -> float:
     rhs = numpy_model.make_rhs(params, ROWS[:, 0], ROWS[:, 1:])
     from scipy.integrate import solve_ivp
@@ -162,6 +191,7 @@ def main(argv=None):
     ap.add_argument("--sums", action="store_true", help="only the table of the two forms of the contact-point sums")
     ap.add_argument("--sum-batches", type=int, nargs="*", default=[1, 8, 16, 64, 128, 256, 1024])
     ap.add_argument("--one", action="store_true", help="only the one-trajectory line (no scipy, no tables)")
+    ap.add_argument("--ops", action="store_true", help="only the table of elementwise function costs")
     args = ap.parse_args(argv)
     if args.one:
         one_trajectory(te.load_params("dry_sand"), args.repeat)
@@ -171,6 +201,9 @@ def main(argv=None):
     substeps = n_substeps(DT, DEFAULT_SUBSTEP)
     if args.sums:
         sum_forms(params, args.sum_batches)
+        return
+    if args.ops:
+        elementwise_ops()
         return
     print(f"machine: {platform.processor() or platform.machine()}, {len(parallel.cpu_devices())} host devices "
           f"(cores: {parallel._cores()}), jax {jax.__version__}; float32; substep {DT / substeps * 1e3:g} ms")

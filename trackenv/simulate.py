@@ -291,6 +291,7 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     """
     kind = type(profile)
     batch = profile_values(profile).shape[2:]
+    params = shared_leaves_as_scalars(params, tuple(batch))
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((params, profile, initial)))
     n_dev = len(cpu_devices())
     B = batch[0] if len(batch) == 1 else 0
@@ -316,6 +317,27 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     return Trajectory(jnp.asarray(np.asarray(traj.t)), jax.tree.map(gather, traj.state),
                       {k: gather(v) for k, v in traj.channels.items()}, gather(traj.voltage), gather(traj.diverged),
                       gather(traj.t_diverged))
+
+
+def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
+    """``params`` with every concrete floating leaf of shape ``batch`` whose values are all equal replaced by
+    that one value (a scalar of the same dtype); other leaves, and traced ones, unchanged.
+
+    The model broadcasts a scalar parameter over the vehicles exactly as a constant (*b) array, so the
+    simulation is the same; but XLA's CPU backend runs it faster: a batch whose ``drive_inertia`` or
+    ``track_gauge`` is a (*b) array runs its substep 1.8-2.6x slower per vehicle than one where they are
+    scalars (64 vehicles; the fusions that divide by J_eff or place the tracks lose their
+    vectorisation; README, Performance). Batches built by stacking per-test parameters
+    (:func:`trackenv.compare.stack_trees`) share most leaves.
+    """
+    def one(x):
+        if (isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and x.shape == batch and x.size > 1
+                and jnp.issubdtype(x.dtype, jnp.floating)):
+            values = np.asarray(x)
+            if (values == values.flat[0]).all():
+                return jnp.asarray(values.flat[0], x.dtype)
+        return x
+    return jax.tree.map(one, params)
 
 
 def simulate_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int, dt: float, substeps: int,
@@ -344,8 +366,10 @@ def simulate_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int,
         :class:`Trajectory` with T = ``n_steps + 1`` samples: ``t`` (T,), each channel (T, *b), ``voltage``
         (T, 2, *b), ``diverged`` and ``t_diverged`` (*b).
     """
+    batch = tuple(profile_values(profile).shape[2:])
     if initial is None:
-        initial = initial_state(params, tuple(profile_values(profile).shape[2:]))
+        initial = initial_state(params, batch)
+    params = shared_leaves_as_scalars(params, batch)
     return _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps, t0=t0,
                          unroll=unroll)
 

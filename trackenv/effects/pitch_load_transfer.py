@@ -25,12 +25,14 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
+from ..physics.sums import contact_sum
 from .base import Effect
 
 
 def pitch_gradient(mass, cg_height, area, x, accel):
     """p_x [Pa/m] from Σ F_n x = −m a_x h over both tracks; area, x (1, N, *b), accel (*b)."""
-    s2 = (area * x * x).sum(axis=(0, 1))  # (*b) Σ_i A_i x_i^2 of one track
+    moment = area * x * x
+    s2 = contact_sum(moment, (0, 1), moment.ndim - 2)  # (*b) Σ_i A_i x_i^2 of one track
     return -mass * accel * cg_height / (2.0 * s2)
 
 
@@ -51,7 +53,8 @@ class PitchLoadTransfer(Effect):
         return jnp.zeros(tuple(batch_shape), params.dtype)
 
     def state_rate(self, ctx, forces):
-        fx = forces.longitudinal.sum(axis=(0, 1)) + forces.compaction.sum(axis=0) + forces.body_x
+        long, comp = forces.longitudinal, forces.compaction
+        fx = contact_sum(long, (0, 1), long.ndim - 2) + contact_sum(comp, 0, comp.ndim - 1) + forces.body_x
         accel = fx / ctx.params.vehicle.mass
         return (accel - ctx.state.extra[self.id]) / self.time_constant
 

@@ -51,6 +51,7 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
+from ..physics.sums import contact_sum
 from ..physics.terramechanics import smoothsign
 from .base import Effect
 
@@ -94,7 +95,8 @@ class SlipSinkage(Effect):
 
     def slip_speed(self, kin):
         """Total slip speed S_k [m/s], (2, *b)."""
-        lat = jnp.sqrt(kin.lateral_velocity**2 + SLIP_EPS**2).mean(axis=1)  # (1, *b)
+        speed = jnp.sqrt(kin.lateral_velocity**2 + SLIP_EPS**2)  # (1, N, *b)
+        lat = contact_sum(speed, 1, speed.ndim - 2) / speed.shape[1]  # (1, *b), the mean over the points
         return jnp.sqrt(kin.slip**2 + lat**2 + SLIP_EPS**2) - jnp.sqrt(2.0) * SLIP_EPS
 
     def state_rate(self, ctx, forces):

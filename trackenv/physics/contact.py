@@ -195,7 +195,7 @@ def compaction_force(
     """
     k = tm.bekker_modulus(terrain.k_c, terrain.k_phi, vehicle.track_width)
     per_element = tm.compaction_resistance(
-        normal, kin.area, vehicle.contact_length, k, terrain.sinkage_exponent
+        normal, kin.area, vehicle.contact_length, k, terrain.sinkage_exponent, normal.ndim - 2
     )
     resistance = contact_sum(per_element, 1, normal.ndim - 2) * terrain.deformable
     return -resistance * tm.smoothsign(kin.ground_speed, COMPACTION_SPEED_SMOOTHING)

@@ -11,8 +11,8 @@ integrator's damping. :func:`contact_sum` computes ``a.sum(axes)`` in one of two
   arithmetic around it and vectorises along the vehicle axis. Between :data:`UNROLL_MIN` and
   :data:`UNROLL_MAX` vehicles XLA emits the ``reduce`` inside its loop fusions, and the fusions that
   hold it are the slowest of the substep (a profile per fusion, README Performance); there the unrolled
-  form is 1.45-2x faster per vehicle (``benchmarks/bench_simulate.py --sums``). Below
-  :data:`UNROLL_MIN` vehicles it is slower (measured the same way).
+  form is 1.3-2.9x faster per vehicle (``benchmarks/bench_simulate.py --sums``). For one and two
+  vehicles it is slower (measured the same way).
 
 The two forms add in different orders, so they agree to rounding (float32: ~1e-7 relative), not bit
 for bit; the form depends only on the batch size (and the split, below), so one batch shape always computes the
@@ -32,7 +32,7 @@ import math
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-UNROLL_MIN = 16  # vehicles: from here the unrolled form is the faster (measured, module docstring)
+UNROLL_MIN = 3  # vehicles: from here the unrolled form is the faster (measured, module docstring)
 UNROLL_MAX = 160  # vehicles: from here XLA's CPU backend runs the reductions as YNNPACK kernels
 
 
@@ -60,12 +60,17 @@ def unrolled(batch: int) -> bool:
     return UNROLL_MIN <= batch < UNROLL_MAX
 
 
+def device_batch(shape: tuple[int, ...], nb: int) -> int:
+    """Vehicles one device computes of an array of ``shape`` with ``nb`` trailing vehicle axes: the whole
+    batch, or its share inside :class:`Partitioned`; 1 when ``nb`` is 0."""
+    return -(-math.prod(shape[len(shape) - nb:]) // _PARTS.get()) if nb else 1
+
+
 def contact_sum(a: Float[Array, " ..."], axes: int | tuple[int, ...], nb: int) -> Float[Array, " ..."]:
     """``a.sum(axes)`` over small leading axes (tracks, contact points) of an array with ``nb`` trailing
     batch axes (the vehicles), in the faster form for its batch size (module docstring)."""
     axes = (axes,) if isinstance(axes, int) else tuple(axes)
-    batch = -(-math.prod(a.shape[a.ndim - nb:]) // _PARTS.get()) if nb else 1  # one device's share
-    if not unrolled(batch):
+    if not unrolled(device_batch(a.shape, nb)):
         return jnp.sum(a, axis=axes)
     for ax in sorted((ax % a.ndim for ax in axes), reverse=True):  # the highest first: lower indices stay valid
         total = jnp.take(a, 0, axis=ax)

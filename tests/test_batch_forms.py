@@ -1,0 +1,74 @@
+"""Forms the simulator chooses for speed by batch shape compute the same model.
+
+- ``terramechanics.positive_power``: XLA's ``pow`` for small batches, exp(a log x) from
+  ``EXP_LOG_POWER_MIN`` vehicles; both against float64 numpy, with a finite gradient at x = 0.
+- ``simulate.shared_leaves_as_scalars``: a batch's parameter leaves that hold one value for every vehicle
+  become scalars; the simulation equals the one with the per-vehicle arrays to rounding, and leaves that
+  differ between vehicles, or are traced, stay as they are.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import trackenv as te
+from trackenv.compare import stack_trees
+from trackenv.physics import terramechanics as tm
+from trackenv.simulate import _simulate_jit, shared_leaves_as_scalars, simulate_batch
+
+
+@pytest.mark.parametrize("batch", [(), (8,), (tm.EXP_LOG_POWER_MIN,), (4 * tm.EXP_LOG_POWER_MIN,)])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_positive_power_matches_numpy_in_both_forms(batch, dtype):
+    rng = np.random.default_rng(1)
+    x = rng.uniform(0.0, 2e5, size=(2, 14) + batch)  # Pa: element pressures
+    x.flat[0], x.flat[1] = 0.0, -3.0  # an unloaded element, and a negative input (max(x, 0) = 0)
+    a = 1.0 + 1.0 / 1.1  # (n + 1)/n of dry sand
+    want = np.maximum(x, 0.0) ** a
+    with jax.enable_x64(dtype == np.float64):
+        got = np.asarray(jax.jit(lambda v: tm.positive_power(v, a, len(batch)))(jnp.asarray(x, dtype)))
+    assert got.dtype == dtype
+    rtol = 3e-6 if dtype == np.float32 else 1e-13
+    np.testing.assert_allclose(got, want, rtol=rtol, atol=0.0)
+
+
+@pytest.mark.parametrize("batch", [(), (4 * tm.EXP_LOG_POWER_MIN,)])
+def test_positive_power_gradient_is_finite_at_zero(batch):
+    x = jnp.zeros((2, 14) + batch, jnp.float32).at[0, 0].set(2.0)
+    g = jax.grad(lambda v: tm.positive_power(v, 1.9, len(batch)).sum())(x)
+    assert bool(jnp.all(jnp.isfinite(g)))
+    assert float(g[0, 0].reshape(-1)[0]) == pytest.approx(1.9 * 2.0**0.9, rel=1e-5)
+
+
+def _batch(n: int):
+    """A stacked batch on dry sand where only the cohesion differs between vehicles, and its voltages."""
+    base = te.load_params("dry_sand")
+    trees = [te.replace(base, **{"terrain.cohesion": float(base.terrain.cohesion) * (1.0 + 0.05 * k)}) for k in range(n)]
+    params = stack_trees(trees)
+    rows = np.array([[0, 0, 0], [0.2, 11.8, 11.8], [0.8, 16.0, 6.0], [1.2, 0.0, 0.0]])
+    volts = np.repeat(rows[:, 1:, None], n, axis=2)
+    return params, te.VoltageProfile.from_arrays(rows[:, 0], volts)
+
+
+def test_shared_leaves_become_scalars_and_differing_ones_stay():
+    params, _ = _batch(6)
+    out = shared_leaves_as_scalars(params, (6,))
+    assert out.terrain.cohesion.shape == (6,)  # differs between the vehicles
+    assert out.vehicle.drive_inertia.shape == () and out.vehicle.track_gauge.shape == ()
+    assert float(out.vehicle.mass) == float(params.vehicle.mass[0])
+    assert out.vehicle.mass.dtype == params.vehicle.mass.dtype
+    shapes = jax.eval_shape(lambda p: shared_leaves_as_scalars(p, (6,)), params)  # traced: nothing collapses
+    assert shapes.vehicle.mass.shape == (6,)
+
+
+def test_simulation_with_shared_leaves_as_scalars_equals_the_per_vehicle_arrays():
+    params, prof = _batch(6)
+    initial = te.initial_state(params, (6,))
+    got = simulate_batch(params, prof, 24, 0.05, 100, initial)
+    want = _simulate_jit(params, prof, initial, n_steps=24, dt=0.05, substeps=100, t0=0.0, unroll=1)
+    for ch in ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "heading"):
+        a, b = np.asarray(got.channels[ch]), np.asarray(want.channels[ch])
+        assert np.max(np.abs(a - b)) <= 1e-4 * max(np.max(np.abs(b)), 1e-3), ch
+    assert not np.array_equal(np.asarray(got.channels["speed_ideal"][-1, 0]),
+                              np.asarray(got.channels["speed_ideal"][-1, 5]))  # the cohesion still differs
