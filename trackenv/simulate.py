@@ -326,8 +326,8 @@ def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
     The model broadcasts a scalar parameter over the vehicles exactly as a constant (*b) array, so the
     simulation is the same; but XLA's CPU backend runs it faster: a batch whose ``drive_inertia`` or
     ``track_gauge`` is a (*b) array runs its substep 1.8-2.6x slower per vehicle than one where they are
-    scalars (64 vehicles; the fusions that divide by J_eff or place the tracks lose their
-    vectorisation; README, Performance). Batches built by stacking per-test parameters
+    scalars (64 vehicles: seven of the substep's fusions run 3-7x slower, for a reason inside XLA that was
+    not found; README, Performance). Batches built by stacking per-test parameters
     (:func:`trackenv.compare.stack_trees`) share most leaves.
     """
     def one(x):

@@ -24,8 +24,8 @@ EXP_LOG_POWER_MIN = 64  # vehicles (as counted by device_batch): from here exp(a
 def positive_power(x: _In, a: _In, nb: int = 0) -> _Out:
     """max(x, 0)^a for a > 0 [units of x^a], in the faster form for the batch (``nb`` trailing vehicle axes).
 
-    XLA's CPU ``pow`` is not vectorised: on a (2, 14, 256) array it takes about 7 ns per element against
-    1.2 ns for an ``exp`` and a ``log`` (``benchmarks/bench_simulate.py --ops``). From
+    XLA's CPU ``pow`` is not vectorised: on a (2, 14, 256) array it takes about 4.5 ns per element against
+    1.3 ns for exp(a log x) (``benchmarks/bench_simulate.py --ops``). From
     :data:`EXP_LOG_POWER_MIN` vehicles (counted as :func:`trackenv.physics.sums.device_batch` counts them)
     exp(a log x) makes the batched simulation faster; for one vehicle and small batches ``pow`` does
     (README, Performance). The relative error of exp(a log x)
