@@ -300,7 +300,7 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
         padded = max(padded, n_dev * sums.UNROLL_MAX)
     pad = padded - B
     if traced or len(batch) != 1 or split_count(padded) == 1:
-        return simulate_batch(params, profile, n_steps, dt, substeps, initial)
+        return _run_batch(params, profile, n_steps, dt, substeps, initial)
     if initial is None:
         initial = initial_state(params, batch)
     if pad:
@@ -312,7 +312,7 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
         profile = kind(profile.t, widen(profile_values(profile)))
     params, values, initial = shard((params, profile_values(profile), initial), B + pad, axis=-1)
     t = jax.device_put(profile.t, jax.sharding.NamedSharding(values.sharding.mesh, jax.sharding.PartitionSpec()))
-    traj = simulate_batch(params, kind(t, values), n_steps, dt, substeps, initial)
+    traj = _run_batch(params, kind(t, values), n_steps, dt, substeps, initial)
     gather = lambda x: jnp.asarray(np.asarray(x)[..., :B])  # noqa: E731  (to the host, back onto the default device)
     return Trajectory(jnp.asarray(np.asarray(traj.t)), jax.tree.map(gather, traj.state),
                       {k: gather(v) for k, v in traj.channels.items()}, gather(traj.voltage), gather(traj.diverged),
@@ -366,10 +366,15 @@ def simulate_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int,
         :class:`Trajectory` with T = ``n_steps + 1`` samples: ``t`` (T,), each channel (T, *b), ``voltage``
         (T, 2, *b), ``diverged`` and ``t_diverged`` (*b).
     """
-    batch = tuple(profile_values(profile).shape[2:])
+    params = shared_leaves_as_scalars(params, tuple(profile_values(profile).shape[2:]))
+    return _run_batch(params, profile, n_steps, dt, substeps, initial, t0=t0, unroll=unroll)
+
+
+def _run_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int, dt: float, substeps: int,
+               initial: State | None = None, *, t0: float = 0.0, unroll: int = 1) -> Trajectory:
+    """:func:`simulate_batch` on parameters whose shared leaves are already scalars (or are to stay arrays)."""
     if initial is None:
-        initial = initial_state(params, batch)
-    params = shared_leaves_as_scalars(params, batch)
+        initial = initial_state(params, tuple(profile_values(profile).shape[2:]))
     return _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps, t0=t0,
                          unroll=unroll)
 
