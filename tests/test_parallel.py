@@ -151,8 +151,9 @@ def _simulate_script(out):
 
 
 def test_small_loops_are_one_kernel_and_change_nothing_but_speed(tmp_path):
-    """One vehicle's substep loop is emitted as one kernel (XLA's small-while-loop call) and a batch of 64
-    is not; the trajectory equals the one without the option (a fresh process with it switched off)."""
+    """One vehicle's substep loop and a 64-vehicle batch's are emitted as one kernel (XLA's small-while-loop
+    call), a batch of 256 (whose contact sums are a library reduce, ``sums.UNROLL_MAX``) is not; the
+    trajectory equals the one without the option (a fresh process with it switched off)."""
     import subprocess
     import sys
 
@@ -173,7 +174,8 @@ def test_small_loops_are_one_kernel_and_change_nothing_but_speed(tmp_path):
             params, prof, s0, n_steps=4, dt=0.05, substeps=100).compile())
 
     assert hoisted(None)
-    assert not hoisted(64)
+    assert hoisted(64)
+    assert not hoisted(256)
     on, off = tmp_path / "on.npz", tmp_path / "off.npz"
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     for path, extra in ((on, {}), (off, {"TRACKENV_SMALL_LOOP_BYTES": "0"})):

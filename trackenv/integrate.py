@@ -30,7 +30,7 @@ from .params import Params
 from .physics import contact
 from .physics.model import Evaluation, State, decay_rates, evaluate
 from .physics.motor import current_decay_rate, resistance_slope
-from .physics.sums import contact_sum
+from .physics.sums import contact_sum, divide_by_parameter
 
 _TAYLOR_CUTOFF = 1.0  # |z| below which the phi-functions use their Taylor series
 
@@ -135,10 +135,11 @@ def diagonal_damping(
     dtau_dw = resistance_slope(veh, params.internal, state.omega)
     nb = state.vel.ndim - 1
     traction = contact_sum(dfl_ds, 1, nb)  # (2, *b) dF_x,k/ds_k
-    lam_w = (dtau_dw + kin.belt_radius**2 * traction) / veh.drive_inertia
-    lam_u = contact_sum(traction, 0, nb) / veh.mass
-    lam_v = -contact_sum(dflat_dvy, (0, 1), nb) / veh.mass
-    lam_r = (contact_sum(kin.y**2 * traction, 0, nb) - contact_sum(kin.x**2 * dflat_dvy, (0, 1), nb)) / veh.yaw_inertia
+    lam_w = divide_by_parameter(dtau_dw + kin.belt_radius**2 * traction, veh.drive_inertia)
+    lam_u = divide_by_parameter(contact_sum(traction, 0, nb), veh.mass)
+    lam_v = -divide_by_parameter(contact_sum(dflat_dvy, (0, 1), nb), veh.mass)
+    lam_r = divide_by_parameter(contact_sum(kin.y**2 * traction, 0, nb) - contact_sum(kin.x**2 * dflat_dvy, (0, 1), nb),
+                                veh.yaw_inertia)
     lam_vel = jnp.stack([lam_u, lam_v, lam_r])
     return jnp.maximum(lam_w, 0.0), jnp.maximum(lam_vel, 0.0)
 

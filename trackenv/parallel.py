@@ -26,12 +26,14 @@ it as one function (its small-while-loop hoisting pass, 1 kB by default). :func:
 (called with :func:`configure_host_devices`) raises that limit to :data:`SMALL_LOOP_BYTES`, through
 ``--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold``, under the same conditions (JAX not
 started, the option not already in ``XLA_FLAGS``); ``TRACKENV_SMALL_LOOP_BYTES=0`` opts out. The limit
-takes one vehicle's simulation (one trajectory ran 1.6x faster with it), batches of up to about 12
-vehicles, and the single env's whole step, row loop included, on every task (0.03-0.30 MB by XLA's cost
-analysis; the path tasks' reference polylines make theirs the largest). A larger limit also takes larger
-batches, and those lose: with 1 MB the 64-environment vector env ran 0.67x as fast. From about 160
-vehicles the contact-point sums are a library reduce (:mod:`trackenv.physics.sums`) that the pass does not
-take (README, Performance).
+takes one vehicle's simulation (one trajectory ran 1.6x faster with it), the single env's whole step, row
+loop included, on every task (0.03-0.30 MB by XLA's cost analysis; the path tasks' reference polylines
+make theirs the largest), and every batch whose contact-point sums are unrolled (up to 159 vehicles per
+device; from 160 they are a library reduce, :mod:`trackenv.physics.sums`, that the pass does not take).
+At 8 MB, against the former 0.4 MB (which took batches of up to about 12 vehicles): ``simulate`` on
+batches of 32-128 vehicles ran 1.3-1.5x faster and the 256-environment vector env (the training
+configuration) 1.3x; the batched vector env with 64 or 128 environments on one device ran 0.85-0.9x as
+fast (its row loop, the default, did not change) (README, Performance).
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ MIN_PER_DEVICE = 4  # vehicles per core below which a simulation batch is not sp
 MIN_ENVS_PER_DEVICE = 128  # the same for the vector env's batched program, whose state stays split between steps (measured, README)
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8
-SMALL_LOOP_BYTES = 400_000  # XLA's small-while-loop limit [bytes accessed by the loop] (measured, README)
+SMALL_LOOP_BYTES = 8_000_000  # XLA's small-while-loop limit [bytes accessed by the loop] (measured, README)
 
 
 def _cores() -> int:

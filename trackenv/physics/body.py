@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ..params import Vehicle
+from .sums import divide_by_parameter
 
 
 def pose_rate(pose: Float[Array, " 3 *b"], vel: Float[Array, " 3 *b"]) -> Float[Array, " 3 *b"]:
@@ -26,7 +27,8 @@ def velocity_rate(
     """Body-frame Newton-Euler: m(du/dt - v r) = F_x, m(dv/dt + u r) = F_y, I_z dr/dt = M_z."""
     u, v, r = vel[0], vel[1], vel[2]
     return jnp.stack(
-        [force_x / vehicle.mass + v * r, force_y / vehicle.mass - u * r, moment_z / vehicle.yaw_inertia]
+        [divide_by_parameter(force_x, vehicle.mass) + v * r, divide_by_parameter(force_y, vehicle.mass) - u * r,
+         divide_by_parameter(moment_z, vehicle.yaw_inertia)]  # divisions in every batch (sums.divide_by_parameter)
     )
 
 

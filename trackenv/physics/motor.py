@@ -5,6 +5,7 @@ from __future__ import annotations
 from jaxtyping import Array, Float
 
 from ..params import InternalResistance, Vehicle
+from .sums import divide_by_parameter
 from .terramechanics import smoothsign, step5_slope
 
 OMEGA_SMOOTHING = 0.05  # rad/s, width of smoothsign(omega) for stiction and b*_int (docs/model.md §5)
@@ -38,7 +39,8 @@ def sprocket_acceleration(
     tau_back: Float[Array, " 2 *b"],
 ) -> Float[Array, " 2 *b"]:
     """J_eff domega/dt = alpha i - b_eff omega - tau_int - tau_stick sgn(omega) - tau_back (4.1) [rad/s^2]."""
-    return (vehicle.alpha * current - friction_torque(vehicle, omega) - tau_int - tau_back) / vehicle.drive_inertia
+    torque = vehicle.alpha * current - friction_torque(vehicle, omega) - tau_int - tau_back
+    return divide_by_parameter(torque, vehicle.drive_inertia)  # a division in every batch
 
 
 def current_drive(

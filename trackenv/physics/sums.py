@@ -1,4 +1,5 @@
-"""Sums over a vehicle's contact points and tracks, in the form XLA's CPU backend runs fastest.
+"""Sums over a vehicle's contact points and tracks, and divisions by a vehicle parameter, in the forms
+XLA's CPU backend runs fastest (:func:`contact_sum`, :func:`divide_by_parameter`).
 
 The model sums element arrays (2, N, *b) (track, contact point, vehicles last) over their first two
 axes: the track forces, the body force and moment (docs/model.md §5), the traction slopes of the
@@ -30,6 +31,7 @@ import contextvars
 import math
 
 import jax.numpy as jnp
+from jax import lax
 from jaxtyping import Array, Float
 
 UNROLL_MIN = 3  # vehicles: from here the unrolled form is the faster (measured, module docstring)
@@ -73,8 +75,28 @@ def contact_sum(a: Float[Array, " ..."], axes: int | tuple[int, ...], nb: int) -
     if not unrolled(device_batch(a.shape, nb)):
         return jnp.sum(a, axis=axes)
     for ax in sorted((ax % a.ndim for ax in axes), reverse=True):  # the highest first: lower indices stay valid
-        total = jnp.take(a, 0, axis=ax)
+        # static slices: jnp.take added an out-of-bounds select to each (386 selects in a 64-vehicle program)
+        total = lax.index_in_dim(a, 0, ax, keepdims=False)
         for i in range(1, a.shape[ax]):
-            total = total + jnp.take(a, i, axis=ax)
+            total = total + lax.index_in_dim(a, i, ax, keepdims=False)
         a = total
     return a
+
+
+
+def divide_by_parameter(numerator: Float[Array, " ..."], parameter: Float[Array, " *#b"]) -> Float[Array, " ..."]:
+    """``numerator / parameter`` for a vehicle parameter (a scalar, or one value per vehicle on the
+    trailing axes), computed as a division in every batch.
+
+    XLA's CPU fusion treats a division as expensive and does not copy it into the fusions that read its
+    result once per contact point; a multiplication it does copy. XLA's algebraic simplifier rewrites
+    x / broadcast(d) as x * broadcast(1/d) when d is an array, so a batch whose J_eff, mass or yaw
+    inertia differed per vehicle lost that boundary: the per-track and body chains that end in these
+    divisions (the contact sums, the drive torques, the body forces) were recomputed inside the
+    element-level fusions, once for each of the N contact points. The substep ran 2.6x slower per
+    vehicle with a per-vehicle J_eff (64 vehicles), 1.8x with a per-vehicle mass and yaw inertia (16
+    vehicles) (README Performance). Adding 0 * numerator gives the divisor the numerator's shape without
+    a broadcast, so the division stays one. The value is the same as ``numerator / parameter`` up to the
+    rounding of one division; a non-finite numerator still gives a non-finite result.
+    """
+    return numerator / (parameter + 0.0 * numerator)
