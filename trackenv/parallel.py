@@ -32,8 +32,8 @@ make theirs the largest), and every batch whose contact-point sums are unrolled 
 device; from 160 they are a library reduce, :mod:`trackenv.physics.sums`, that the pass does not take).
 At 8 MB, against the former 0.4 MB (which took batches of up to about 12 vehicles): ``simulate`` on
 batches of 32-128 vehicles ran 1.3-1.5x faster and the 256-environment vector env (the training
-configuration) 1.3x; the batched vector env with 64 or 128 environments on one device ran 0.85-0.9x as
-fast (its row loop, the default, did not change) (README, Performance).
+configuration) 1.3-1.6x; the batched vector env with 64 or 128 environments on one device ran 0.85-0.97x
+as fast (its row loop, the default, did not change) (README, Performance).
 """
 
 from __future__ import annotations

@@ -83,7 +83,6 @@ def contact_sum(a: Float[Array, " ..."], axes: int | tuple[int, ...], nb: int) -
     return a
 
 
-
 def divide_by_parameter(numerator: Float[Array, " ..."], parameter: Float[Array, " *#b"]) -> Float[Array, " ..."]:
     """``numerator / parameter`` for a vehicle parameter (a scalar, or one value per vehicle on the
     trailing axes), computed as a division in every batch.
