@@ -324,10 +324,11 @@ def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
     that one value (a scalar of the same dtype); other leaves, and traced ones, unchanged.
 
     The model broadcasts a scalar parameter over the vehicles exactly as a constant (*b) array, so the
-    simulation is the same; but XLA's CPU backend runs it faster: a batch whose ``drive_inertia`` or
-    ``track_gauge`` is a (*b) array runs its substep 1.8-2.6x slower per vehicle than one where they are
-    scalars (64 vehicles: seven of the substep's fusions run 3-7x slower, for a reason inside XLA that was
-    not found; README, Performance). Batches built by stacking per-test parameters
+    simulation is the same. It was introduced when a (*b) ``drive_inertia`` or ``track_gauge`` made the
+    substep 1.8-2.6x slower per vehicle (64 vehicles); the cause, XLA rewriting the division by J_eff as a
+    multiplication and copying it into every contact point's fusion, is now avoided in the model itself
+    (:func:`trackenv.physics.sums.divide_by_parameter`), and the gain left from scalars has not been
+    measured since (README, Performance). Batches built by stacking per-test parameters
     (:func:`trackenv.compare.stack_trees`) share most leaves.
     """
     def one(x):

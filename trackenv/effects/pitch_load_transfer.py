@@ -25,7 +25,7 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
-from ..physics.sums import contact_sum
+from ..physics.sums import contact_sum, divide_by_parameter
 from .base import Effect
 
 
@@ -55,7 +55,7 @@ class PitchLoadTransfer(Effect):
     def state_rate(self, ctx, forces):
         long, comp = forces.longitudinal, forces.compaction
         fx = contact_sum(long, (0, 1), long.ndim - 2) + contact_sum(comp, 0, comp.ndim - 1) + forces.body_x
-        accel = fx / ctx.params.vehicle.mass
+        accel = divide_by_parameter(fx, ctx.params.vehicle.mass)  # a division in every batch
         return (accel - ctx.state.extra[self.id]) / self.time_constant
 
     def gradient(self, ctx):

@@ -93,8 +93,10 @@ def divide_by_parameter(numerator: Float[Array, " ..."], parameter: Float[Array,
     inertia differed per vehicle lost that boundary: the per-track and body chains that end in these
     divisions (the contact sums, the drive torques, the body forces) were recomputed inside the
     element-level fusions, once for each of the N contact points. The substep ran 2.6x slower per
-    vehicle with a per-vehicle J_eff (64 vehicles), 1.8x with a per-vehicle mass and yaw inertia (16
-    vehicles) (README Performance). Adding 0 * numerator gives the divisor the numerator's shape without
+    vehicle with a per-vehicle J_eff (64 vehicles; README Performance). The divisions by the mass and the
+    yaw inertia take the same form for the same reason; no slowdown of their own was measured (a
+    per-vehicle mass cost 1.8x at 16 vehicles through XLA's small-loop limit instead,
+    :data:`trackenv.parallel.SMALL_LOOP_BYTES`). Adding 0 * numerator gives the divisor the numerator's shape without
     a broadcast, so the division stays one. The value is the same as ``numerator / parameter`` up to the
     rounding of one division; a non-finite numerator still gives a non-finite result.
     """
