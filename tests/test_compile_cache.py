@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-# one process: enable the cache (JAX's threshold lowered so that a short simulation's program is stored),
-# simulate 0.5 s of a go-stop, report the directory, the cache hits and the final state
+# one process: enable the cache, simulate 0.5 s of a go-stop, report the directory, the cache hits, the final
+# state and JAX's minimum compile time for storing a program
 SCRIPT = r"""
 import hashlib, json, sys
 import jax
@@ -19,12 +19,12 @@ import trackenv as te
 hits = []
 jax.monitoring.register_event_listener(lambda name, **kw: hits.append(name) if name.endswith("cache_hits") else None)
 path = te.enable_compilation_cache(*sys.argv[1:2])
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
 p = te.load_params("dry_sand")
 traj = te.simulate(p, te.VoltageProfile.constant(10.0, 10.0), 0.5)
 x = np.asarray(traj.channels["speed_ideal"])
 print(json.dumps({"path": None if path is None else str(path), "hits": len(hits),
-                  "digest": hashlib.sha256(x.tobytes()).hexdigest(), "last": float(x[-1])}))
+                  "digest": hashlib.sha256(x.tobytes()).hexdigest(), "last": float(x[-1]),
+                  "min_compile_s": jax.config.jax_persistent_cache_min_compile_time_secs}))
 """
 
 
@@ -51,6 +51,20 @@ def test_second_process_reuses_the_programs_and_gets_the_same_numbers(tmp_path):
     assert second["hits"] >= 1  # the simulation's program came from disk
     assert second["digest"] == first["digest"]  # bit for bit
     assert 0.5 < second["last"] < 3.0  # a go-stop at 10 V is moving after 0.5 s: a real simulation ran
+
+
+def test_small_programs_are_stored_unless_a_threshold_is_set(tmp_path):
+    """Every program is stored (JAX's default stores only those that took at least 1 s to compile: here a 0.5 s
+    simulation's core and none of the small operations around it, on a fast machine nothing at all); a
+    threshold set for JAX is kept."""
+    cache = tmp_path / "cache"
+    out = run({"TRACKENV_COMPILATION_CACHE": str(cache)})
+    assert out["min_compile_s"] == 0.0
+    small = [f for f in cache.rglob("*") if f.is_file() and "simulate_core" not in f.name]
+    assert small, "no program other than the simulation core was stored"
+    kept = run({"TRACKENV_COMPILATION_CACHE": str(tmp_path / "other"), "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "30"})
+    assert kept["min_compile_s"] == 30.0
+    assert not any(f.is_file() for f in (tmp_path / "other").rglob("*"))  # nothing here takes 30 s to compile
 
 
 @pytest.mark.parametrize("setting", ["off", "0", "no"])
