@@ -18,10 +18,9 @@ The command line (:mod:`trackenv.cli`, hence ``make demo``) turns it on; a libra
 
 Every compiled program is stored, however fast it compiled (:data:`MIN_COMPILE_TIME_S`; JAX's default
 keeps only those that took at least 1 s, the simulation cores). A diagnosis also compiles several hundred
-small programs (the array operations between its simulations): a 2-test diagnosis of the field twin
-(``trackenv diagnose data/field/thesis --tests go_stop_dry_sand,j_turn_asphalt --no-figures``) took 91-92 s
-in a second process with only the simulation cores cached (18 files, 4.8 MB) and 76 s with everything
-cached (588 files, 7.2 MB), 162-172 s with an empty cache, the same verdict every time. A threshold set
+small programs (the array operations between its simulations); with those cached too, a second process
+ran a 2-test diagnosis 1.20x faster than with the simulation cores alone (README, Performance, "Compiled
+programs across processes", which gives the command and the measurements). A threshold set
 through ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` or ``jax.config`` is kept. The directory grows with
 every new program (batch shape, effect, test length) and is never pruned: deleting it only costs the next
 process its compilations. The cache is trusted code: do not point it at a directory that others can write
