@@ -557,6 +557,7 @@ def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):
     assert info["end_loss"] <= info["start_loss"]
     assert info["grad_norm"] is not None and np.isfinite(info["grad_norm"])
     assert info["stop"] in ("small step", "small gradient", "small improvement", "iteration limit")
+    assert "internal_resistance_factor" not in info["held_still"]  # the go-stops feel it
     before = sim.n_vehicle_seconds
     res2 = polish_folds(sim, cand, [fd], [start], [None], [np.inf], iters=4)
     # its simulations count in the report's vehicle-seconds (both tests are 5 s long: one bucket)
@@ -578,14 +579,16 @@ def test_marquardt_step_holds_an_inert_parameter_still():
     r = -(J @ z_true)  # residuals at z = 0 of r(z) = J z + r0 with its zero at z_true
     J_inert = J.copy()
     J_inert[:, 2] = 1e-7 * rng.normal(size=200)
-    d = marquardt_step(J_inert, r, 1e-9)
-    assert d[2] == 0.0
+    d, moved = marquardt_step(J_inert, r, 1e-9)
+    assert d[2] == 0.0 and moved.tolist() == [True, True, False]
     ls = np.linalg.lstsq(J_inert[:, :2], -r, rcond=None)[0]
     np.testing.assert_allclose(d[:2], ls, rtol=1e-6)
     J_weak = J.copy()
     J_weak[:, 2] *= 0.01
     r_weak = -(J_weak @ z_true)
-    np.testing.assert_allclose(marquardt_step(J_weak, r_weak, 1e-9), z_true, rtol=1e-4)
+    d_weak, moved_weak = marquardt_step(J_weak, r_weak, 1e-9)
+    np.testing.assert_allclose(d_weak, z_true, rtol=1e-4)
+    assert moved_weak.all()
 
 
 def test_single_test_without_controls_says_so(tmp_path):

@@ -18,10 +18,10 @@ After the derivative-free search (:mod:`.fit`) each fold's best point is refined
   the loss drops (λ / 3), else rejected (λ × 4); a parameter the residuals do not feel is held still
   (:func:`marquardt_step`); the encoder window chosen by the search is kept.
 
-Reported per fold: ``iterations``, ``grad_norm`` (‖∂loss/∂z‖ at the final point), ``last_rel_improvement``
-and ``stop`` ("small step", "small gradient", "small improvement", "iteration limit", "gradient not
-finite"). A fold's polished point replaces the search's only if its loss (recomputed by :mod:`.fit`) is
-lower.
+Reported per fold: ``iterations``, ``grad_norm`` (‖∂loss/∂z‖ at the final point), ``last_rel_improvement``,
+``held_still`` (the parameters the last step held still: the data do not feel them there) and ``stop``
+("small step", "small gradient", "small improvement", "iteration limit", "gradient not finite"). A fold's
+polished point replaces the search's only if its loss (recomputed by :mod:`.fit`) is lower.
 """
 
 from __future__ import annotations
@@ -178,8 +178,9 @@ class _Problem:
         return np.asarray(r, np.float64), np.asarray(J, np.float64), pred
 
 
-def marquardt_step(J: np.ndarray, r: np.ndarray, lam: float) -> np.ndarray:
-    """The Levenberg-Marquardt step −(JᵀJ + λ diag JᵀJ)⁻¹ Jᵀr for Jacobian ``J`` (N, p) and residuals ``r`` (N,).
+def marquardt_step(J: np.ndarray, r: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """The Levenberg-Marquardt step −(JᵀJ + λ diag JᵀJ)⁻¹ Jᵀr for Jacobian ``J`` (N, p) and residuals ``r`` (N,),
+    and the (p,) bool mask of the parameters it moves.
 
     A parameter whose Jacobian column is below ``INERT_COLUMN`` of the largest column's norm is held still
     (step 0) and the step is solved for the others. Such a column is float32 rounding, not sensitivity (the
@@ -196,7 +197,7 @@ def marquardt_step(J: np.ndarray, r: np.ndarray, lam: float) -> np.ndarray:
     if free.any():
         Af = A[np.ix_(free, free)]
         d[free] = -np.linalg.solve(Af + lam * np.diag(np.diag(Af)) + 1e-9 * np.eye(int(free.sum())), g[free])
-    return d
+    return d, free
 
 
 def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, iters: int = 4,
@@ -218,7 +219,8 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
     lam = np.full(F, 1e-2)
     active = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(loss)
     info = [{"used_gradient": bool(active[f]), "iterations": 0, "grad_norm": None, "last_rel_improvement": None,
-             "stop": "iteration limit" if active[f] else "gradient not finite", "start_loss": float(loss[f])}
+             "stop": "iteration limit" if active[f] else "gradient not finite", "start_loss": float(loss[f]),
+             "held_still": []}
             for f in range(F)]
     best_pred = [pred] * F
     fold_z = z.copy()
@@ -232,7 +234,8 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
             if 2 * np.linalg.norm(g) < 1e-6 * max(loss[f], 1e-12):
                 info[f]["stop"], active[f] = "small gradient", False
                 continue
-            d = marquardt_step(J[f], r[f], lam[f])
+            d, free = marquardt_step(J[f], r[f], lam[f])
+            info[f]["held_still"] = [s.name for s, moved in zip(cand.specs, free) if not moved]
             nd = np.linalg.norm(d)
             if nd > 2.0:
                 d *= 2.0 / nd
