@@ -4,6 +4,7 @@ non-null case's effect visible above the noise against an independent effect-fre
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from types import SimpleNamespace
@@ -293,3 +294,32 @@ def test_effects_visible_against_effect_free_replay(bench):
             assert v < 3.0, stats
         else:
             assert v > 3.0, stats
+
+
+# ---------------------------------------------------------------------------------------------- near the limit
+
+
+def test_scaled_multiplies_the_amplitude_only():
+    rng = np.random.default_rng(5)
+    for cls in blind.BLIND_EFFECTS.values():
+        e = cls.sample(rng)
+        half = blind.scaled(e, 0.5)
+        for name in (f.name for f in dataclasses.fields(e)):
+            a, b = float(getattr(e, name)), float(getattr(half, name))
+            if name in cls.AMPLITUDE:
+                assert b == pytest.approx(0.5 * a, rel=1e-6), (cls.__name__, name)
+                assert float(getattr(cls.neutral(), name)) == 0.0  # an amplitude is what neutral() sets to 0
+            else:
+                assert b == a, (cls.__name__, name)
+    gated = blind.BlindInternalResistance.sample(rng)
+    assert float(blind.scaled(gated, 3.0).gate) == 1.0  # a blend of two laws stops at the alternative law
+
+
+def test_near_limit_case_is_scaled_into_the_window(tmp_path):
+    """The 40-case benchmark's case_000 (seed 0): the closest of 7 draws of the lateral-friction law shows 30 sigma;
+    scaled (its gate, the blend with the base law), the case lands in the 1-3 sigma window."""
+    truth = blind.make_case(tmp_path / "c", np.random.default_rng([0, 0]), label="lateral_friction_radius", n_tests=2,
+                            t_max=6.0, near_limit=True)
+    assert truth["near_limit"] and truth["magnitude_scale"] < 0.5
+    assert blind.NEAR_LIMIT[0] <= truth["max_visibility"] <= blind.NEAR_LIMIT[1]
+    assert min(truth["mobility"]) >= blind.MOBILITY_MIN

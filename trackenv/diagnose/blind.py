@@ -43,6 +43,13 @@ vehicle is driven, i.e. up to the end of the release ramp) and (b) the vehicle s
 (peak |u| or |r| at least ``MOBILITY_MIN`` of the effect-free run). After three failed draws the
 maneuvers are redrawn as well. The resulting "visibility" is part of the answer key.
 
+A case drawn *near the detection limit* (``near_limit``) wants a visibility inside ``NEAR_LIMIT`` (1-3 σ)
+instead of above ``VISIBILITY_MIN``. If none of its draws lands there, the closest draw's amplitude is
+scaled into the window (:func:`scaled`: the fields that ``neutral()`` sets to 0, or the ``gate`` that
+blends an alternative law with the base model's), by a few secant steps on the visibility against the
+factor, within [``MIN_SCALE``, ``MAX_SCALE``]; the factor is part of the answer key (``magnitude_scale``).
+A case whose window lies outside those factors keeps its closest draw.
+
 The answer key (label, effect class, parameters, nuisance, per-test details) is returned and stored
 OUTSIDE the case folder; the case folder's ``meta.json`` files say the logs are synthetic but carry no
 effect information.
@@ -151,6 +158,7 @@ class BlindSlipSinkage(Effect):
 
     id: ClassVar[str] = "blind_slip_sinkage"
     label: ClassVar[str] = "slip_sinkage"
+    AMPLITUDE: ClassVar[tuple[str, ...]] = ("ref_sinkage",)  # scaled by :func:`scaled`
 
     ref_sinkage: jax.Array  # m, z_ref
     dig_time: jax.Array  # s, τ_dig
@@ -238,6 +246,7 @@ class BlindLateralFriction(Effect):
 
     id: ClassVar[str] = "blind_lateral_friction"
     label: ClassVar[str] = "lateral_friction_radius"
+    AMPLITUDE: ClassVar[tuple[str, ...]] = ("gate",)  # a blend of this law and the base model's
 
     mu_max: jax.Array  # -
     mu_min: jax.Array  # -
@@ -288,6 +297,7 @@ class BlindInternalResistance(Effect):
 
     id: ClassVar[str] = "blind_internal_resistance"
     label: ClassVar[str] = "internal_resistance"
+    AMPLITUDE: ClassVar[tuple[str, ...]] = ("gate",)  # a blend of this law and the base model's
 
     b0: jax.Array  # N m
     omega0: jax.Array  # rad/s
@@ -330,6 +340,7 @@ class BlindGrouserStiction(Effect):
 
     id: ClassVar[str] = "blind_grouser_stiction"
     label: ClassVar[str] = "grouser_stiction"
+    AMPLITUDE: ClassVar[tuple[str, ...]] = ("beta",)
 
     beta: jax.Array  # -, peak amplification
     slide_speed: jax.Array  # m/s, v_s
@@ -375,6 +386,7 @@ class BlindPitchLoadTransfer(Effect):
 
     id: ClassVar[str] = "blind_pitch_load_transfer"
     label: ClassVar[str] = "pitch_load_transfer"
+    AMPLITUDE: ClassVar[tuple[str, ...]] = ("height_factor",)
 
     frequency: jax.Array  # Hz, f_p
     damping: jax.Array  # -, ζ
@@ -437,6 +449,8 @@ class BlindSensorArtifacts(Effect):
 
     id: ClassVar[str] = "blind_sensor_artifacts"
     label: ClassVar[str] = "sensor_artifacts"
+    AMPLITUDE: ClassVar[tuple[str, ...]] = ("time_constant", "gyro_bias", "gyro_scale", "current_offset_left",
+                                             "current_offset_right")
 
     time_constant: jax.Array  # s, τ (0: no low-pass)
     gyro_bias: jax.Array  # rad/s, β
@@ -510,6 +524,26 @@ TURNING = ("j_turn", "lane_change", "zero_radius_turn", "random_steer", "step_st
 DEFORMABLE_TERRAINS = ("dry_sand", "dry_sand_1", "dry_sand_2", "sandy_loam_1", "sandy_loam_2", "sandy_loam_3")
 HARD_TERRAINS = ("asphalt",)
 NEAR_LIMIT = (1.0, 3.0)  # × noise σ (0.25 s moving average): the window of a near-detection-limit case
+
+
+SCALE_ROUNDS = 4  # batches (two scales each) that :func:`_scale_into_window` may spend on one near-limit case
+MAX_SCALE = 3.0  # an amplitude may grow at most this much (a gate, a blend of two laws, at most to 1)
+# and shrink at most this much: far below its drawn range the visibility measures how sensitive the model is to
+# any small change (stick-slip on hard ground), not the effect: one grouser case showed 1.1 sigma at 0.0002 x beta
+MIN_SCALE = 0.02
+
+
+def scaled(effect: Effect, factor: float) -> Effect:
+    """``effect`` with its amplitude (``AMPLITUDE``: the fields that are 0 in ``neutral()``) times ``factor``; for the
+    two forms that replace a base-model law, the ``gate`` that blends the two laws (at most 1)."""
+    changes = {}
+    for name in type(effect).AMPLITUDE:
+        x = getattr(effect, name)
+        val = factor * np.asarray(x, np.float64)
+        if name == "gate":
+            val = np.minimum(val, 1.0)
+        changes[name] = jnp.asarray(val, x.dtype)
+    return dataclasses.replace(effect, **changes)
 
 
 def effect_params(effect: Effect) -> dict:
@@ -821,7 +855,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
                           "n_missing": int(rng.integers(0, 6)) if rng.random() < 0.5 else 0})
         return tests, profiles
 
-    effect, params, visibility, mobility, tries = None, {}, None, None, 0
+    effect, params, visibility, mobility, tries, magnitude_scale = None, {}, None, None, 0, 1.0
     base = (terrain, nuisance, None)
     if label == "none":
         tests, profiles = draw_tests()
@@ -866,14 +900,20 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
                     else:
                         ok = score >= VISIBILITY_MIN and min(mob) >= MOBILITY_MIN
                         closeness = score
-                    cand = (ok, closeness if min(mob) >= MOBILITY_MIN else -100.0, eff, ch_h, vis, mob, tests, profiles)
+                    cand = (ok, closeness if min(mob) >= MOBILITY_MIN else -100.0, eff, ch_h, vis, mob, tests, profiles,
+                            ch_base)
                     if best is None or (cand[0], cand[1]) > (best[0], best[1]):
                         best = cand
                     if ok:
                         break
         if best is None:
             raise RuntimeError(f"{label}: every sampled effect diverged")
-        _, _, eff, ch, visibility, mobility, tests, profiles = best
+        ok, _, eff, ch, visibility, mobility, tests, profiles, ch_base = best
+        if near_limit and not ok:  # no draw landed in the window: scale the closest one's amplitude into it
+            found = _scale_into_window(eff, terrain, nuisance, tests, profiles, ch_base, noise, sensor, t_sim,
+                                       max(max(r.values()) for r in visibility))
+            if found is not None:
+                magnitude_scale, eff, ch, visibility, mobility = found
         effect, params = eff.id, effect_params(eff)
 
     # write the test folders
@@ -913,9 +953,49 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
         "visible": None if visibility is None else bool(
             max(max(r.values()) for r in visibility) >= VISIBILITY_MIN and min(mobility) >= MOBILITY_MIN),
         "near_limit": bool(near_limit),
+        "magnitude_scale": magnitude_scale,
         "mobility": mobility,
         "tries": tries,
     }
+
+
+def _scale_into_window(eff, terrain, nuisance, tests, profiles, ch_base, noise, sensor, t_sim, score):
+    """Scale ``eff``'s amplitude (:func:`scaled`) until its visibility lies in ``NEAR_LIMIT``: each round simulates
+    two factors, the log-log secant (or, in the first round, linear) guess toward the window's geometric middle
+    from the two points closest to it, and that guess's square root (a shorter step, since the visibility is not
+    linear in the amplitude). Returns ``(factor, effect, channels, visibility, mobility)`` of the first factor in
+    the window whose vehicle still moves, or None after ``SCALE_ROUNDS`` rounds or when the window needs a factor
+    outside [``MIN_SCALE``, ``MAX_SCALE``] (the case then keeps its draw)."""
+    target = math.sqrt(NEAR_LIMIT[0] * NEAR_LIMIT[1])
+    hi = 1.0 if type(eff).AMPLITUDE == ("gate",) else MAX_SCALE
+    pts = [(1.0, score)]  # (factor, visibility)
+    cols = _columns(profiles)
+    n_tests = len(tests)
+    for _ in range(SCALE_ROUNDS):
+        pts.sort(key=lambda p: abs(math.log(max(p[1], 1e-9) / target)))
+        (s0, v0), slope = pts[0], 1.0
+        if len(pts) > 1 and pts[1][1] > 0 and v0 > 0 and pts[1][0] != s0 and pts[1][1] != v0:
+            slope = math.log(pts[1][1] / v0) / math.log(pts[1][0] / s0)
+            slope = min(max(slope, 0.25), 4.0)
+        step = math.log(target / max(v0, 1e-9)) / slope
+        factors = [float(np.clip(s0 * math.exp(step), MIN_SCALE, hi)),
+                   float(np.clip(s0 * math.exp(step / 2), MIN_SCALE, hi))]
+        if all(any(abs(f - p[0]) < 1e-12 for p in pts) for f in factors):
+            break  # both guesses already simulated: the window lies outside [MIN_SCALE, hi]
+        effs = [scaled(eff, f) for f in factors]
+        ch2, div2 = _simulate_columns([(terrain, nuisance, effs[0])] * MAX_TESTS
+                                      + [(terrain, nuisance, effs[1])] * MAX_TESTS, cols * 2, t_sim)
+        for h, (f, e) in enumerate(zip(factors, effs)):
+            if div2[h * MAX_TESTS:h * MAX_TESTS + n_tests].any():
+                continue
+            ch_h = _half(ch2, h)
+            vis = _visibility(ch_h, ch_base, tests, noise, sensor)
+            mob = _mobility(ch_h, ch_base, tests)
+            v = max(max(r.values()) for r in vis)
+            if NEAR_LIMIT[0] <= v <= NEAR_LIMIT[1] and min(mob) >= MOBILITY_MIN:
+                return f, e, ch_h, vis, mob
+            pts.append((f, v))
+    return None
 
 
 def balanced_labels(n: int, rng, null_fraction: float = 0.2) -> list[str]:
