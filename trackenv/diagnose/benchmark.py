@@ -42,10 +42,11 @@ def summarize(rows: list[dict]) -> dict:
     shrink = [r["shrink"] for r in correct if r["label"] != NONE]
     own = [r["own_shrink"] for r in correct if r["label"] != NONE and r.get("own_shrink") is not None]
     true_shrink = [r["true_effect_shrink"] for r in rows if r["label"] != NONE and r["true_effect_shrink"] is not None]
+    flagged = sum(r["verdict"] != NONE for r in nulls)
     return {
-        "cases": n, "top1_accuracy": len(correct) / n if n else None,
-        "null_cases": len(nulls),
-        "null_false_positive_rate": (sum(r["verdict"] != NONE for r in nulls) / len(nulls)) if nulls else None,
+        "cases": n, "correct": len(correct), "top1_accuracy": len(correct) / n if n else None,
+        "null_cases": len(nulls), "null_flagged": flagged,
+        "null_false_positive_rate": flagged / len(nulls) if nulls else None,
         "effect_cases": n - len(nulls),
         "effect_recall": (sum(r["verdict"] == r["label"] for r in rows if r["label"] != NONE) / (n - len(nulls)))
         if n > len(nulls) else None,
@@ -248,10 +249,8 @@ def _write(out: Path, rows: list[dict], seed: int, timing: dict) -> dict:
          f"{summary['cases']} cases ({summary['null_cases']} null, {summary['near_limit_cases']} near the detection "
          f"limit), seed {seed}; effects in forms different from the candidate library (trackenv/diagnose/blind.py); "
          "labels withheld from the diagnosis.", "",
-         f"- top-1 accuracy: **{summary['top1_accuracy']:.2f}** "
-         f"({sum(r['verdict'] == r['label'] for r in rows)} / {summary['cases']})",
-         f"- null cases flagged: **{sum(r['verdict'] != NONE for r in rows if r['label'] == NONE)} / "
-         f"{summary['null_cases']}**",
+         f"- top-1 accuracy: **{summary['top1_accuracy']:.2f}** ({summary['correct']} / {summary['cases']})",
+         f"- null cases flagged: **{summary['null_flagged']} / {summary['null_cases']}**",
          f"- median held-out gap shrink when right: **{'–' if med is None else f'{med:.2f}'}** (from the base model; "
          f"the effect's own part, beyond recalibrating the base: {'–' if own_med is None else f'{own_med:.2f}'})",
          f"- median held-out gap shrink of the true label's candidate, every effect case: "

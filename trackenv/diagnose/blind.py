@@ -878,10 +878,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
                     effs = [None, cls.sample(rng, terrain)]
                 else:
                     effs = [cls.sample(rng, terrain), cls.sample(rng, terrain)]
-                ch2, div2 = _simulate_columns([(terrain, nuisance, effs[0])] * MAX_TESTS
-                                              + [(terrain, nuisance, effs[1])] * MAX_TESTS, cols * 2, t_sim)
-                for h, eff in enumerate(effs):
-                    ch_h, div_h = _half(ch2, h), div2[h * MAX_TESTS:(h + 1) * MAX_TESTS]
+                for eff, (ch_h, div_h) in zip(effs, _simulate_pair(terrain, nuisance, effs, cols, t_sim)):
                     if eff is None:
                         if div_h.any():
                             raise RuntimeError("base simulation diverged")
@@ -891,11 +888,9 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
                     drawn += 1
                     if div_h[:n_tests].any():
                         continue
-                    vis = _visibility(ch_h, ch_base, tests, noise, sensor)
-                    mob = _mobility(ch_h, ch_base, tests)
-                    score = max(max(r.values()) for r in vis)
+                    vis, mob, score = _judge(ch_h, ch_base, tests, noise, sensor)
                     if near_limit:
-                        ok = NEAR_LIMIT[0] <= score <= NEAR_LIMIT[1] and min(mob) >= MOBILITY_MIN
+                        ok = _in_window(score, mob)
                         closeness = -abs(math.log(score / math.sqrt(NEAR_LIMIT[0] * NEAR_LIMIT[1]))) if score > 0 else -99
                     else:
                         ok = score >= VISIBILITY_MIN and min(mob) >= MOBILITY_MIN
@@ -911,7 +906,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
         ok, _, eff, ch, visibility, mobility, tests, profiles, ch_base = best
         if near_limit and not ok:  # no draw landed in the window: scale the closest one's amplitude into it
             found = _scale_into_window(eff, terrain, nuisance, tests, profiles, ch_base, noise, sensor, t_sim,
-                                       max(max(r.values()) for r in visibility))
+                                       _peak(visibility))
             if found is not None:
                 magnitude_scale, eff, ch, visibility, mobility = found
         effect, params = eff.id, effect_params(eff)
@@ -949,9 +944,9 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
         "nuisance": {"params": nuisance, "noise_std": noise, "pose_noise_std": pose_noise, "current_sensor": sensor},
         "tests": tests,
         "visibility": visibility,
-        "max_visibility": None if visibility is None else max(max(r.values()) for r in visibility),
+        "max_visibility": None if visibility is None else _peak(visibility),
         "visible": None if visibility is None else bool(
-            max(max(r.values()) for r in visibility) >= VISIBILITY_MIN and min(mobility) >= MOBILITY_MIN),
+            _peak(visibility) >= VISIBILITY_MIN and min(mobility) >= MOBILITY_MIN),
         "near_limit": bool(near_limit),
         "magnitude_scale": magnitude_scale,
         "mobility": mobility,
@@ -983,19 +978,38 @@ def _scale_into_window(eff, terrain, nuisance, tests, profiles, ch_base, noise, 
         if all(any(abs(f - p[0]) < 1e-12 for p in pts) for f in factors):
             break  # both guesses already simulated: the window lies outside [MIN_SCALE, hi]
         effs = [scaled(eff, f) for f in factors]
-        ch2, div2 = _simulate_columns([(terrain, nuisance, effs[0])] * MAX_TESTS
-                                      + [(terrain, nuisance, effs[1])] * MAX_TESTS, cols * 2, t_sim)
-        for h, (f, e) in enumerate(zip(factors, effs)):
-            if div2[h * MAX_TESTS:h * MAX_TESTS + n_tests].any():
+        for f, e, (ch_h, div_h) in zip(factors, effs, _simulate_pair(terrain, nuisance, effs, cols, t_sim)):
+            if div_h[:n_tests].any():
                 continue
-            ch_h = _half(ch2, h)
-            vis = _visibility(ch_h, ch_base, tests, noise, sensor)
-            mob = _mobility(ch_h, ch_base, tests)
-            v = max(max(r.values()) for r in vis)
-            if NEAR_LIMIT[0] <= v <= NEAR_LIMIT[1] and min(mob) >= MOBILITY_MIN:
+            vis, mob, v = _judge(ch_h, ch_base, tests, noise, sensor)
+            if _in_window(v, mob):
                 return f, e, ch_h, vis, mob
             pts.append((f, v))
     return None
+
+
+def _simulate_pair(terrain, nuisance, effs, cols, t_sim):
+    """Two effects (None: effect-free) on the case's (padded) tests in one batch: per effect, its channels
+    {name: (T, MAX_TESTS)} and per-column divergence flags."""
+    ch2, div2 = _simulate_columns([(terrain, nuisance, effs[0])] * MAX_TESTS
+                                  + [(terrain, nuisance, effs[1])] * MAX_TESTS, cols * 2, t_sim)
+    return [(_half(ch2, h), div2[h * MAX_TESTS:(h + 1) * MAX_TESTS]) for h in (0, 1)]
+
+
+def _peak(vis) -> float:
+    """The largest visibility [noise σ] over a case's tests and signals (:func:`_visibility`)."""
+    return max(max(r.values()) for r in vis)
+
+
+def _judge(ch, ch_base, tests, noise, sensor):
+    """(visibility, mobility, peak visibility) of channels ``ch`` against the effect-free ``ch_base``."""
+    vis = _visibility(ch, ch_base, tests, noise, sensor)
+    return vis, _mobility(ch, ch_base, tests), _peak(vis)
+
+
+def _in_window(peak: float, mobility: list) -> bool:
+    """A near-limit case's criterion: peak visibility inside ``NEAR_LIMIT`` and the vehicle still moving."""
+    return NEAR_LIMIT[0] <= peak <= NEAR_LIMIT[1] and min(mobility) >= MOBILITY_MIN
 
 
 def balanced_labels(n: int, rng, null_fraction: float = 0.2) -> list[str]:
