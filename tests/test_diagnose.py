@@ -662,3 +662,36 @@ def test_blind_benchmark_small(tmp_path):
     # the label never reaches the case folders
     for f in (tmp_path / "cases").rglob("*.json"):
         assert "lateral_friction" not in f.read_text() and "slip_sinkage" not in f.read_text()
+
+
+def test_an_effects_two_fits_share_one_polish_simulation(tmp_path):
+    """An effect fitted on the control and on the base model (``each_branch``) is polished as one problem: the
+    fit compiles one simulation program for its search and one for both polishes (three when each branch was
+    polished alone, the base branch's parameters all equal and thus a batch of another structure). Each fit
+    keeps its own rows: the base branch stands on the control's anchor, the other on the control's fitted
+    values, and each row is polished by itself."""
+    import importlib
+
+    from trackenv.diagnose.batch import BatchSimulator
+    from trackenv.diagnose.fit import fit_candidate
+
+    simulate_module = importlib.import_module("trackenv.simulate")
+    tests, _ = load_tests(_base_case(tmp_path / "case", seed=5))
+    sim = BatchSimulator(tests)
+    cands = {c.name: c for c in candidate_set()}
+    recal = cands["recalibrate_base"]
+    fitted = {"internal_resistance_factor": 1.2, "cohesion_factor": 0.8, "friction_angle_factor": 1.02,
+              "shear_modulus_factor": 1.3}
+    cand = cands["pitch_load_transfer"].standing_on(recal)
+    folds = make_folds(tests)
+    below = [[fitted, dict(recal.anchor)] for _ in range(len(folds) + 1)]
+    jitted = simulate_module._simulate_jit
+    before = jitted._cache_size()
+    on_control, on_base = fit_candidate(sim, cand, folds, rounds=0, min_round=3, per_fold=3, polish_iters=1,
+                                        below=below, each_branch=(0, 1))
+    assert jitted._cache_size() - before <= 2
+    for fit, stands_on in ((on_control, fitted), (on_base, recal.anchor)):
+        for ff in [*fit.folds, fit.full]:
+            assert {k: ff.params[f"recalibrate_base.{k}"] for k in stands_on} == pytest.approx(stands_on)
+            assert ff.polish["used_gradient"] and ff.polish["iterations"] == 1
+            assert np.isfinite(ff.polish["start_loss"]) and ff.polish["end_loss"] <= ff.polish["start_loss"]

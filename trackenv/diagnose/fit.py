@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.stats import qmc
@@ -347,36 +348,70 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
                     last_gain[b or 0, f] = ((before[k] - score[0]) / max(before[k], 1e-12)
                                             if np.isfinite(before[k]) else 1.0)
                     k += 1
-    out = [_finish(sim, cand, tests, fold_defs, pool, F, keep_branch(b), below_of if below is not None else None,
-                   below_keys, rounds, last_gain[b or 0], polish_iters, jacobian, progress, n_sims, n_div)
-           for b in branches]
+    picks = [_search_best(cand, fold_defs, pool, F, keep_branch(b), below_of if below is not None else None)
+             for b in branches]
+    polished = _polish_branches(sim, cand, fold_defs, picks, polish_iters, jacobian, progress)
+    out = [_finish(cand, tests, fold_defs, pick, pol, below_keys, rounds, last_gain[b or 0], n_sims, n_div)
+           for b, pick, pol in zip(branches, picks, polished)]
     return out if each_branch and below is not None else out[0]
 
 
-def _finish(sim, cand, tests, fold_defs, pool, F, keep, below_of, below_keys, rounds, last_gain, polish_iters,
-            jacobian, progress, n_sims, n_div) -> CandidateFit:
-    """A fit from the searched pool (points of one branch if ``keep``): each fold's best point, polished."""
-    n = len(tests)
-    p = cand.n_params
-    # the search's best point per fold
-    best_i = []
-    search_score = []
+class _Pick(NamedTuple):
+    """The search's best point of each fold in one branch: what the polish starts from."""
+
+    units: list  # per fold: unit point (p,)
+    chosen: list | None  # per fold: the parameter set it stands on (None: stands on nothing)
+    windows: list  # per fold: encoder window [s] or None
+    preds: list  # per fold: predictions of every test
+    search_score: list  # per fold: the search's calibration loss
+
+
+def _search_best(cand, fold_defs, pool, F, keep, below_of) -> _Pick:
+    """Each fold's best searched point (of one branch if ``keep``)."""
+    best_i, search_score = [], []
     for f, fd in enumerate(fold_defs):
         order, score = pool.select(f, fd.weights, F, keep)
         best_i.append(order[0])
         search_score.append(float(score[0]))
-    units = [np.asarray(pool.unit[i], np.float64) for i in best_i]
-    chosen = [below_of(pool.owner[i]) for i in best_i] if below_of is not None else None
-    wins = [pool.window[i] for i in best_i]
-    preds = [pool.pred[i] for i in best_i]
-    scores = list(search_score)
+    return _Pick([np.asarray(pool.unit[i], np.float64) for i in best_i],
+                 [below_of(pool.owner[i]) for i in best_i] if below_of is not None else None,
+                 [pool.window[i] for i in best_i], [pool.pred[i] for i in best_i], search_score)
+
+
+def _polish_branches(sim, cand, fold_defs, picks: list[_Pick], polish_iters, jacobian, progress) -> list[dict | None]:
+    """Levenberg-Marquardt from every branch's fold points in **one** :func:`.polish.polish_folds` problem (rows:
+    branch-major), split back per branch; ``None`` per branch where nothing is polished.
+
+    The fits of an effect on the control and on the base model differ only in the values they stand on, so one
+    compiled simulation serves both: polished apart, the base branch's parameters (all its values equal) became
+    scalars and its own program, compiled once more per effect. Each row keeps its own damping and stopping
+    (:func:`.polish.polish_folds`), so a row's iterations are those it would take alone."""
+    if not (cand.n_params and polish_iters > 0):
+        return [None] * len(picks)
+    from .polish import not_polished_note, polish_folds
+
+    F, k = len(fold_defs), len(picks)
+    joint = lambda field: [x for pk in picks for x in getattr(pk, field)]  # noqa: E731
+    res = polish_folds(sim, cand, fold_defs * k, joint("units"), joint("windows"), joint("search_score"),
+                       iters=polish_iters, progress=progress, jacobian=jacobian,
+                       below=None if picks[0].chosen is None else joint("chosen"))
+    rows = lambda key, b: res[key][b * F:(b + 1) * F]  # noqa: E731
+    return [{"units": rows("units", b), "preds": rows("preds", b), "scores": rows("scores", b),
+             "improved": rows("improved", b), "info": rows("info", b), "notes": not_polished_note(rows("info", b)),
+             "n_simulations": res["n_simulations"] // k} for b in range(k)]
+
+
+def _finish(cand, tests, fold_defs, pick: _Pick, res: dict | None, below_keys, rounds, last_gain, n_sims,
+            n_div) -> CandidateFit:
+    """A fit from one branch's searched points and their polish (``res``; None: not polished)."""
+    n = len(tests)
+    p = cand.n_params
+    F = len(fold_defs)
+    units, chosen, wins = list(pick.units), pick.chosen, pick.windows
+    preds, search_score, scores = list(pick.preds), pick.search_score, list(pick.search_score)
     polish_info = [dict() for _ in range(F)]
     notes = []
-    if p and polish_iters > 0:
-        from .polish import polish_folds
-
-        res = polish_folds(sim, cand, fold_defs, units, wins, scores, iters=polish_iters, progress=progress,
-                           jacobian=jacobian, below=chosen)
+    if res is not None:
         n_sims += res["n_simulations"]
         for f in range(F):
             polish_info[f] = res["info"][f]

@@ -21,7 +21,9 @@ After the derivative-free search (:mod:`.fit`) each fold's best point is refined
 Reported per fold: ``iterations``, ``grad_norm`` (‖∂loss/∂z‖ at the final point), ``last_rel_improvement``,
 ``held_still`` (the parameters the last step held still: the data do not feel them there) and ``stop``
 ("small step", "small gradient", "small improvement", "iteration limit", "gradient not finite"). A fold's
-polished point replaces the search's only if its loss (recomputed by :mod:`.fit`) is lower.
+polished point replaces the search's only if its loss (recomputed by :mod:`.fit`) is lower. An effect's fits
+on the control and on the base model are polished as one problem, one row per fold and fit (``.fit``), which
+compiles one simulation for both.
 """
 
 from __future__ import annotations
@@ -200,6 +202,13 @@ def marquardt_step(J: np.ndarray, r: np.ndarray, lam: float) -> tuple[np.ndarray
     return d, free
 
 
+def not_polished_note(info: list[dict]) -> list[str]:
+    """The report's note on the fits whose search point had no finite gradient (``info``: per fit, as
+    :func:`polish_folds` returns it)."""
+    bad = sum(not i["used_gradient"] for i in info)
+    return [f"gradient not finite at the search point of {bad} of {len(info)} fits (those not polished)"] if bad else []
+
+
 def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, iters: int = 4,
                  progress=None, jacobian: str = "secant", below: list | None = None) -> dict:
     """Levenberg-Marquardt from each fold's search point; see the module docstring. ``below``: per fold, the
@@ -285,9 +294,5 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
     if progress:
         progress(0)
     n_veh = sum(len(b.tests) for b in sim.buckets) * F
-    notes = []
-    bad = [f for f in range(F) if not info[f]["used_gradient"]]
-    if bad:
-        notes.append(f"gradient not finite at the search point of {len(bad)} of {F} fits (those not polished)")
     return {"units": units_new, "preds": preds_new, "scores": scores_new, "improved": improved, "info": info,
-            "notes": notes, "n_simulations": n_calls * n_veh * ((1 + 2 * p) if jacobian == "secant" else (1 + p))}
+            "notes": not_polished_note(info), "n_simulations": n_calls * n_veh * ((1 + 2 * p) if jacobian == "secant" else (1 + p))}
