@@ -684,14 +684,16 @@ def test_an_effects_two_fits_share_one_polish_simulation(tmp_path):
               "shear_modulus_factor": 1.3}
     cand = cands["pitch_load_transfer"].standing_on(recal)
     folds = make_folds(tests)
-    below = [[fitted, dict(recal.anchor)] for _ in range(len(folds) + 1)]
+    below = [[{k: v * (1 + 0.01 * f) for k, v in fitted.items()}, dict(recal.anchor)]  # per fold, as a control fits them
+             for f in range(len(folds) + 1)]
     jitted = simulate_module._simulate_jit
     before = jitted._cache_size()
     on_control, on_base = fit_candidate(sim, cand, folds, rounds=0, min_round=3, per_fold=3, polish_iters=1,
                                         below=below, each_branch=(0, 1))
     assert jitted._cache_size() - before <= 2
-    for fit, stands_on in ((on_control, fitted), (on_base, recal.anchor)):
-        for ff in [*fit.folds, fit.full]:
+    for branch, fit in enumerate((on_control, on_base)):
+        for f, ff in enumerate([*fit.folds, fit.full]):
+            stands_on = below[f][branch]
             assert {k: ff.params[f"recalibrate_base.{k}"] for k in stands_on} == pytest.approx(stands_on)
             assert ff.polish["used_gradient"] and ff.polish["iterations"] == 1
             assert np.isfinite(ff.polish["start_loss"]) and ff.polish["end_loss"] <= ff.polish["start_loss"]

@@ -893,7 +893,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
                         ok = _in_window(score, mob)
                         closeness = -abs(math.log(score / math.sqrt(NEAR_LIMIT[0] * NEAR_LIMIT[1]))) if score > 0 else -99
                     else:
-                        ok = score >= VISIBILITY_MIN and min(mob) >= MOBILITY_MIN
+                        ok = _visible(score, mob)
                         closeness = score
                     cand = (ok, closeness if min(mob) >= MOBILITY_MIN else -100.0, eff, ch_h, vis, mob, tests, profiles,
                             ch_base)
@@ -945,8 +945,7 @@ def make_case(case_dir, rng, label: str | None = None, n_tests: int | None = Non
         "tests": tests,
         "visibility": visibility,
         "max_visibility": None if visibility is None else _peak(visibility),
-        "visible": None if visibility is None else bool(
-            _peak(visibility) >= VISIBILITY_MIN and min(mobility) >= MOBILITY_MIN),
+        "visible": None if visibility is None else _visible(_peak(visibility), mobility),
         "near_limit": bool(near_limit),
         "magnitude_scale": magnitude_scale,
         "mobility": mobility,
@@ -1005,6 +1004,11 @@ def _judge(ch, ch_base, tests, noise, sensor):
     """(visibility, mobility, peak visibility) of channels ``ch`` against the effect-free ``ch_base``."""
     vis = _visibility(ch, ch_base, tests, noise, sensor)
     return vis, _mobility(ch, ch_base, tests), _peak(vis)
+
+
+def _visible(peak: float, mobility: list) -> bool:
+    """An effect case's criterion: peak visibility at least ``VISIBILITY_MIN`` and the vehicle still moving."""
+    return bool(peak >= VISIBILITY_MIN and min(mobility) >= MOBILITY_MIN)
 
 
 def _in_window(peak: float, mobility: list) -> bool:
