@@ -47,6 +47,7 @@ from .stats import (
     centred_interval,
     dm_test,
     gap_test,
+    huber_loss,
     max_t_pvalue,
     noise_ar1,
     paired_covariance,
@@ -74,8 +75,9 @@ RULE_TEXT = (
     "beats `none` on the held-out samples: a fixed-design paired test whose variance is the instruments' "
     "AR(1) noise projected on the two predictions' difference, max-T corrected over all effect candidates "
     "(p < alpha); (3) it beats the `recalibrate_base` control the same way (max-T over the effects, p < alpha) and also by "
-    "a Diebold-Mariano test (Newey-West variance, bandwidth >= 2 correlation times of the loss differential, "
-    "p < alpha), else the verdict is `none`: a gap that tuning closes; (4) a physical effect that does not beat "
+    "a Diebold-Mariano test on Huber losses (k = 1.345 noise units per channel sample; Newey-West variance, "
+    "bandwidth >= 2 correlation times of the loss differential, p < alpha), else the verdict is `none`: a gap "
+    "that tuning closes; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
     "itself passes (2)-(3) and predicts the held-out data at least as well (held-out score); if it predicts them "
     "worse, the data do not separate the two and neither is named; (5) it closes at least 10% of the held-out "
@@ -215,6 +217,18 @@ def evidence(data: list[TestData], fits: dict) -> dict:
     return ev
 
 
+def robust_losses(ev: dict, name: str) -> list[np.ndarray]:
+    """Per test: (K,) candidate ``name``'s per-sample held-out loss for the Diebold-Mariano test: the mean over
+    signals of the Huber loss (:func:`.stats.huber_loss`) of each signal's weighted error, on the samples every
+    candidate predicts (NaN elsewhere)."""
+    out = []
+    for j, errs in enumerate(ev["err_held"][name]):
+        st = np.stack([huber_loss(e**2 * ev["weights"][j][sig]) for sig, e in errs.items()])
+        n_ok = np.sum(np.isfinite(st), axis=0)
+        out.append(np.where(n_ok > 0, np.nansum(st, axis=0) / np.maximum(n_ok, 1), np.nan))
+    return out
+
+
 def compare(ev: dict, a: str, b: str) -> dict:
     """The paired test of "candidate ``a`` predicts the held-out samples better than ``b``" (:func:`.stats.paired_test`)."""
     return paired_test(ev["err_held"][a], ev["err_held"][b], ev["noise"], ev["weights"])
@@ -248,6 +262,12 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     sensor = min(sensors, key=score.get) if sensors else None
     physical = [n for n in effects if effect_of(n) != SENSOR]
     tests = {}
+    robust = {}
+
+    def robust_of(x):
+        if x not in robust:
+            robust[x] = robust_losses(ev, x)
+        return robust[x]
 
     def p_of(x, ref, family):
         key = f"{x} vs {ref}"
@@ -266,7 +286,7 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
         pr = p_of(e, RECALIBRATE, effects)
         if pr is not None:  # and by the random-design test: a control the fit did not tune well is not beaten
             key = f"{e} vs {RECALIBRATE} (Diebold-Mariano)"
-            tests[key] = dm_test(ev["ws_held"][e], ev["ws_held"][RECALIBRATE])["p"]
+            tests[key] = dm_test(robust_of(e), robust_of(RECALIBRATE))["p"]
             pr = max(pr, tests[key])
         if pr is not None and pr >= alpha:
             return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ "

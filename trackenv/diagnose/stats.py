@@ -34,7 +34,12 @@ the family, not the Bonferroni bound.
 **Diebold-Mariano** (:func:`dm_test`, the random-design check against the control): per sample k the
 loss differential d_k = ℓ_B,k − ℓ_A,k; per test its mean and the Newey-West variance with a bandwidth of
 at least twice the integrated correlation time of d, so that the slow systematic variation of d is counted
-as uncertainty, not only the noise; tests independent, z = Σ d̄_j / √Σ v_j.
+as uncertainty, not only the noise; tests independent, z = Σ d̄_j / √Σ v_j. The verdict feeds it Huber
+losses (:func:`huber_loss`): quadratic up to ``HUBER_K`` weighted noise units, linear beyond. A prediction
+that follows a bifurcation (the rocking after a stop, where float rounding can switch a residual of 200 σ
+on or off) then weighs like 2·1.345·200 rather than 200², so the test asks where one prediction is
+consistently better, not which one caught a chaotic event. The test stays a Diebold-Mariano test: its
+null hypothesis is "equal expected loss" for whatever loss it is given.
 
 **Intervals** (:func:`block_bootstrap`): a moving-block bootstrap whose block length per test is the
 correlation time of the squared residuals (at least 0.2 s), tests resampled when there are three or
@@ -51,6 +56,7 @@ from scipy.signal import lfilter
 from scipy.stats import norm
 
 ALPHA = 0.05
+HUBER_K = 1.345  # noise units: Huber's constant (95 % efficiency at Gaussian noise), the Diebold-Mariano loss's bend
 MAD_EFFICIENCY = 1.36  # Var(σ̂_MAD)/σ² · (2K): the MAD's variance inflation over the sample SD (Gaussian)
 
 
@@ -204,6 +210,14 @@ def hac_mean_var(d: np.ndarray) -> tuple[float, float, int]:
     for lag in range(1, L + 1):
         s += 2.0 * (1.0 - lag / (L + 1)) * float(np.dot(x[lag:], x[:-lag])) / n
     return m, max(s, g0 / n) / n, L
+
+
+def huber_loss(sq: np.ndarray, k: float = HUBER_K) -> np.ndarray:
+    """Huber loss 2ρ(e) of standardized errors, from their squares ``sq`` = e² (noise units²; NaN passes):
+    e² for |e| ≤ ``k``, 2k|e| − k² beyond (continuous, with a continuous slope, at |e| = k)."""
+    sq = np.asarray(sq, np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.where(sq <= k * k, sq, 2.0 * k * np.sqrt(np.maximum(sq, 0.0)) - k * k)
 
 
 def dm_test(loss_a: list, loss_b: list) -> dict:
