@@ -109,14 +109,16 @@ class Diagnosis:
         return self.report["verdict"]
 
 
+def _mean_over_signals(terms: list[np.ndarray]) -> np.ndarray:
+    """(K,) per sample, the mean of the signals' terms that are finite there (NaN where none is)."""
+    st = np.stack(terms)
+    n_ok = np.sum(np.isfinite(st), axis=0)
+    return np.where(n_ok > 0, np.nansum(st, axis=0) / np.maximum(n_ok, 1), np.nan)
+
+
 def _weighted_sq(tests: list[TestData], sq: list[dict]) -> list[np.ndarray]:
     """Per test: (K,) the loss's per-sample term (mean over signals of weighted squared error, :func:`sq_errors`)."""
-    out = []
-    for j, t in enumerate(tests):
-        st = np.stack([e2 * signal_weight(t, sig) for sig, e2 in sq[j].items()])
-        n_ok = np.sum(np.isfinite(st), axis=0)
-        out.append(np.where(n_ok > 0, np.nansum(st, axis=0) / np.maximum(n_ok, 1), np.nan))
-    return out
+    return [_mean_over_signals([e2 * signal_weight(t, sig) for sig, e2 in sq[j].items()]) for j, t in enumerate(tests)]
 
 
 def _scores(fits: dict) -> dict:
@@ -221,12 +223,8 @@ def robust_losses(ev: dict, name: str) -> list[np.ndarray]:
     """Per test: (K,) candidate ``name``'s per-sample held-out loss for the Diebold-Mariano test: the mean over
     signals of the Huber loss (:func:`.stats.huber_loss`) of each signal's weighted error, on the samples every
     candidate predicts (NaN elsewhere)."""
-    out = []
-    for j, errs in enumerate(ev["err_held"][name]):
-        st = np.stack([huber_loss(e**2 * ev["weights"][j][sig]) for sig, e in errs.items()])
-        n_ok = np.sum(np.isfinite(st), axis=0)
-        out.append(np.where(n_ok > 0, np.nansum(st, axis=0) / np.maximum(n_ok, 1), np.nan))
-    return out
+    return [_mean_over_signals([huber_loss(e**2 * ev["weights"][j][sig]) for sig, e in errs.items()])
+            for j, errs in enumerate(ev["err_held"][name])]
 
 
 def compare(ev: dict, a: str, b: str) -> dict:
