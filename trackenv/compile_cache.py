@@ -19,7 +19,7 @@ The command line (:mod:`trackenv.cli`, hence ``make demo``) turns it on; a libra
 Every compiled program is stored, however fast it compiled (:data:`MIN_COMPILE_TIME_S`; JAX's default
 keeps only those that took at least 1 s, the simulation cores). A diagnosis also compiles several hundred
 small programs (the array operations between its simulations); with those cached too, a second process
-ran a 2-test diagnosis 1.20x faster than with the simulation cores alone (README, Performance, "Compiled
+ran a 2-test diagnosis 1.20x faster than with the simulation cores alone (docs/performance.md, "Compiled
 programs across processes", which gives the command and the measurements). A threshold set
 through ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` or ``jax.config`` is kept. The directory grows with
 every new program (batch shape, effect, test length) and is never pruned: deleting it only costs the next

@@ -33,7 +33,7 @@ device; from 160 they are a library reduce, :mod:`trackenv.physics.sums`, that t
 At 8 MB, against the former 0.4 MB (which took batches of up to about 12 vehicles): ``simulate`` on
 batches of 32-128 vehicles ran 1.3-1.5x faster and the 256-environment vector env (the training
 configuration) 1.3-1.6x; the batched vector env with 64 or 128 environments on one device ran 0.85-0.97x
-as fast (its row loop, the default, did not change) (README, Performance).
+as fast (its row loop, the default, did not change) (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from __future__ import annotations
 import os
 import re
 
-MIN_PER_DEVICE = 4  # vehicles per core below which a simulation batch is not split (measured, README Performance)
+MIN_PER_DEVICE = 4  # vehicles per core below which a simulation batch is not split (measured, docs/performance.md)
 MIN_ENVS_PER_DEVICE = 128  # the same for the vector env's batched program, whose state stays split between steps (measured, README)
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8

@@ -287,7 +287,7 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     (:mod:`trackenv.physics.sums`), so a batch of at least ``UNROLL_MAX`` vehicles is padded to at least that
     many per core, out of the size range where the reduce form is slow. Traced parameters (``jax.jit``,
     ``jax.jacfwd``) run unsplit. The results equal the unsplit batch's to float rounding
-    (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (README, Performance).
+    (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (docs/performance.md).
     """
     kind = type(profile)
     batch = profile_values(profile).shape[2:]
@@ -328,7 +328,7 @@ def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
     substep 1.8-2.6x slower per vehicle (64 vehicles); the cause, XLA rewriting the division by J_eff as a
     multiplication and copying it into every contact point's fusion, is now avoided in the model itself
     (:func:`trackenv.physics.sums.divide_by_parameter`), and the gain left from scalars has not been
-    measured since (README, Performance). Batches built by stacking per-test parameters
+    measured since (docs/performance.md). Batches built by stacking per-test parameters
     (:func:`trackenv.compare.stack_trees`) share most leaves.
     """
     def one(x):

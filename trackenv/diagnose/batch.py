@@ -37,7 +37,7 @@ from .data import TestData
 # (docs/diagnose_benchmark.md, "The fits' substep").
 FIT_SUBSTEP = DEFAULT_SUBSTEP
 # A test shares a bucket only with tests at most 1 / BUCKET_FILL times its length. Padding is cheaper than it
-# looks: per vehicle, a batch of a few hundred runs 1.5-2x faster than one of a hundred (README, Performance),
+# looks: per vehicle, a batch of a few hundred runs 1.5-2x faster than one of a hundred (docs/performance.md),
 # and each extra bucket costs one compiled program per candidate. Measured on the field twin's 6-test
 # diagnosis (benchmarks/bench_diagnose.py, one process, the split layout run first): the 5 s tests in
 # buckets of their own, 645 s; padded to the 10 s lane changes in one bucket, 477 s.

@@ -24,7 +24,7 @@ whatever the batch: the same seed and actions give bit-identical observations, r
 physical state in ``gym.make`` and in any sub-environment of ``TrackVectorEnv``.
 
 Cost: the rows are stepped one after another, so a vector env of N costs about N single-env steps (the
-batched programs of ``physics_batching="vmap"/"native"`` are faster, README Performance). Everything a
+batched programs of ``physics_batching="vmap"/"native"`` are faster, docs/performance.md). Everything a
 row needs, the parameters' derived quantities included, is computed inside the loop body, so that a loop
 XLA emits as one kernel leaves only a handful of kernels around it per call.
 
@@ -95,7 +95,7 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
         # barrier. Without it, XLA's loop-invariant code motion lifts everything computed from the parameters
         # alone out of the row loop, into ~50 separate kernels per call (each a task of XLA's CPU runtime),
         # whereas the loop itself is emitted as one kernel (``parallel.configure_small_loops``). Same
-        # arithmetic: the trajectories are bit-identical (README, Performance).
+        # arithmetic: the trajectories are bit-identical (docs/performance.md).
         f, i, pf, pi = jax.lax.optimization_barrier((f, i, pf, pi))
         return f, i, pcodec.unravel(pf, pi)
 

@@ -30,7 +30,7 @@ an (N, K) float32 array::
   ``jax.custom_batching.custom_vmap``) or ``"auto"`` (vmap below 256 environments, native from 256,
   split over the host devices from ``parallel.MIN_ENVS_PER_DEVICE`` = 128 per device, traced with the
   contact sums' form for one device's share, :class:`trackenv.physics.sums.Partitioned`): one batched program, 1.3-2.9x the throughput of
-  ``"loop"`` from 64 environments (README Performance), but XLA compiles its float32 arithmetic
+  ``"loop"`` from 64 environments (docs/performance.md), but XLA compiles its float32 arithmetic
   differently for each batch shape, so a sub-environment only agrees with the single env to rounding
   (~1e-7 after one step, growing to ~1-3 % of a channel's range within 1.5 s; README Reliability).
   The training configs use ``"auto"``.

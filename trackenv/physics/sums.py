@@ -11,7 +11,7 @@ integrator's damping. :func:`contact_sum` computes ``a.sum(axes)`` in one of two
 - unrolled additions of the axis's slices, first to last: elementwise work that XLA fuses with the
   arithmetic around it and vectorises along the vehicle axis. Between :data:`UNROLL_MIN` and
   :data:`UNROLL_MAX` vehicles XLA emits the ``reduce`` inside its loop fusions, and the fusions that
-  hold it are the slowest of the substep (a profile per fusion, README Performance); there the unrolled
+  hold it are the slowest of the substep (a profile per fusion, docs/performance.md); there the unrolled
   form is 1.3-2.9x faster per vehicle (``benchmarks/bench_simulate.py --sums``). For one and two
   vehicles it is slower (measured the same way).
 
@@ -22,7 +22,7 @@ same way.
 A program that XLA partitions over the host devices (the vector env's batched program, split by
 :func:`trackenv.parallel.shard`) is traced with the whole batch's shape, but each device computes its own
 share. Traced inside :class:`Partitioned` ``(n)``, :func:`contact_sum` picks the form for ``batch / n``
-vehicles, the size each device runs (README Performance, "Both cores").
+vehicles, the size each device runs (docs/performance.md, "Both cores").
 """
 
 from __future__ import annotations
@@ -93,7 +93,7 @@ def divide_by_parameter(numerator: Float[Array, " ..."], parameter: Float[Array,
     inertia differed per vehicle lost that boundary: the per-track and body chains that end in these
     divisions (the contact sums, the drive torques, the body forces) were recomputed inside the
     element-level fusions, once for each of the N contact points. The substep ran 2.6x slower per
-    vehicle with a per-vehicle J_eff (64 vehicles; README Performance). The divisions by the mass and the
+    vehicle with a per-vehicle J_eff (64 vehicles; docs/performance.md). The divisions by the mass and the
     yaw inertia take the same form for the same reason; no slowdown of their own was measured (a
     per-vehicle mass cost 1.8x at 16 vehicles through XLA's small-loop limit instead,
     :data:`trackenv.parallel.SMALL_LOOP_BYTES`). Adding 0 * numerator gives the divisor the numerator's shape without

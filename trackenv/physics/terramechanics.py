@@ -28,7 +28,7 @@ def positive_power(x: _In, a: _In, nb: int = 0) -> _Out:
     1.3 ns for exp(a log x) (``benchmarks/bench_simulate.py --ops``). From
     :data:`EXP_LOG_POWER_MIN` vehicles (counted as :func:`trackenv.physics.sums.device_batch` counts them)
     exp(a log x) makes the batched simulation faster; for one vehicle and small batches ``pow`` does
-    (README, Performance). The relative error of exp(a log x)
+    (docs/performance.md). The relative error of exp(a log x)
     is about |a log x| units in the last place, ~10⁻⁶ in float32 for the pressures here. The ``where`` on
     both sides keeps the value and the gradient at x = 0 finite (0 and 0).
     """
