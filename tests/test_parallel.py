@@ -64,6 +64,41 @@ def test_split_simulation_matches_one_device(monkeypatch):
         np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-6 * np.abs(c).max())
 
 
+
+def test_a_large_batch_runs_in_equal_chunks_and_matches_the_whole_batch(monkeypatch):
+    """Above ``MAX_PER_DEVICE`` vehicles per core a batch runs as equal chunks (padded with its last vehicle),
+    one program for all of them; each vehicle keeps its own voltages and parameters, in order, and the state,
+    channels and flags equal the whole batch's to float rounding."""
+    sim = importlib.import_module("trackenv.simulate")
+    n = len(parallel.cpu_devices())
+    monkeypatch.setattr(parallel, "MAX_PER_DEVICE", 4)
+    monkeypatch.setattr(sim, "CHUNK_ALIGN", 2)
+    b = 9 * n + 1  # three chunks of 4 n vehicles after padding (each core's share rounded up to 4)
+    rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [0.8, 16, 6], [1.0, 0, 0]], float)
+    volts = rows[:, 1:, None] * np.linspace(0.6, 1.2, b)[None, None]
+    prof = te.VoltageProfile.from_arrays(rows[:, 0], volts)
+    params = te.replace(te.load_params("dry_sand"), **{"vehicle.mass": np.linspace(17.0, 26.0, b)})
+    runs, split = [], sim._split
+
+    def counting(params, profile, *args):
+        runs.append(sim.profile_values(profile).shape[-1])
+        return split(params, profile, *args)
+    monkeypatch.setattr(sim, "_split", counting)
+    chunked = te.simulate(params, prof, 1.0, substep=0.001, on_divergence="flag")
+    assert runs == [4 * n] * 3
+    monkeypatch.setattr(parallel, "MAX_PER_DEVICE", 10**9)
+    whole = te.simulate(params, prof, 1.0, substep=0.001, on_divergence="flag")
+    assert runs == [4 * n] * 3 + [b]
+    assert chunked.channels["x"].shape == whole.channels["x"].shape == (21, b)
+    assert np.ptp(np.asarray(whole.channels["x"])[-1]) > 0.05  # the vehicles differ
+    for k in ("speed_ideal", "yaw_rate", "i_left", "x", "y"):
+        a, c = np.asarray(chunked.channels[k]), np.asarray(whole.channels[k])
+        np.testing.assert_allclose(a, c, rtol=1e-5, atol=1e-5 * np.abs(c).max(), err_msg=k)
+    for a, c in zip(jax.tree.leaves(chunked.state), jax.tree.leaves(whole.state)):
+        assert a.shape == c.shape
+        np.testing.assert_allclose(np.asarray(a), np.asarray(c), rtol=1e-4, atol=1e-4 * (np.abs(np.asarray(c)).max() + 1e-12))
+    assert not np.asarray(chunked.diverged).any() and chunked.diverged.shape == (b,)
+
 def test_diagnosis_batches_split_over_the_cores_with_an_odd_batch_padded(monkeypatch):
     """The diagnosis's simulations (trackenv.simulate.simulate_on_cores) split an odd batch over the devices
     by padding it with a copy of its last vehicle; the outputs are the unsplit batch's, padding dropped."""

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import instruments
+from . import instruments, parallel
 from .integrate import advance, is_physical, physical_bounds
 from .parallel import cpu_devices, shard, split_count
 from .physics import sums
@@ -287,12 +287,23 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     (:mod:`trackenv.physics.sums`), so a batch of at least ``UNROLL_MAX`` vehicles is padded to at least that
     many per core, out of the size range where the reduce form is slow. Traced parameters (``jax.jit``,
     ``jax.jacfwd``) run unsplit. The results equal the unsplit batch's to float rounding
-    (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (docs/performance.md).
+    (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (docs/performance.md). A batch of
+    more than ``MAX_PER_DEVICE`` vehicles per core runs as equal chunks, one after the other (:func:`_in_chunks`).
     """
-    kind = type(profile)
     batch = profile_values(profile).shape[2:]
     params = shared_leaves_as_scalars(params, tuple(batch))
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((params, profile, initial)))
+    n_dev = len(cpu_devices())
+    B = batch[0] if len(batch) == 1 else 0
+    if not traced and B > n_dev * parallel.MAX_PER_DEVICE:
+        return _in_chunks(params, profile, n_steps, dt, substeps, initial, n_dev)
+    return _split(params, profile, n_steps, dt, substeps, initial, traced)
+
+
+def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, traced: bool) -> Trajectory:
+    """The body of :func:`simulate_on_cores` after its shared leaves became scalars: split or not."""
+    kind = type(profile)
+    batch = profile_values(profile).shape[2:]
     n_dev = len(cpu_devices())
     B = batch[0] if len(batch) == 1 else 0
     padded = B + (-B) % n_dev
@@ -317,6 +328,50 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     return Trajectory(jnp.asarray(np.asarray(traj.t)), jax.tree.map(gather, traj.state),
                       {k: gather(v) for k, v in traj.channels.items()}, gather(traj.voltage), gather(traj.diverged),
                       gather(traj.t_diverged))
+
+
+CHUNK_ALIGN = 16  # vehicles: a chunk's share per core is a multiple of this (vectorised without a remainder loop)
+
+
+def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, n_dev: int) -> Trajectory:
+    """:func:`simulate_on_cores` of a large one-axis batch as equal chunks of at most ``MAX_PER_DEVICE``
+    vehicles per core, one after the other, each split over the cores; the outputs joined on the host.
+
+    A core's share of the vehicles is then about as large as the one that runs fastest: per vehicle, a
+    batch of 4 096 vehicles (2 048 per core) ran 1.3x slower than chunks of 512, whose working set stays
+    in the core's cache (docs/performance.md, "Large batches in chunks"). The batch is padded with copies
+    of its last vehicle to equal chunks, each core's share a multiple of ``CHUNK_ALIGN``, so that one compiled
+    program serves them all; the results equal the unchunked batch's to float rounding (tests/test_parallel.py).
+    """
+    kind = type(profile)
+    values = profile_values(profile)
+    B = values.shape[-1]
+    if initial is None:
+        initial = initial_state(params, (B,))
+    k = -(-B // (n_dev * parallel.MAX_PER_DEVICE))
+    per = -(-B // (k * n_dev))
+    size = n_dev * (per + (-per) % CHUNK_ALIGN)  # each core's share a multiple of 16 (an odd share ran 1.12x slower)
+    pad = k * size - B
+
+    def padded(x):
+        """A leaf with the vehicles on its last axis, padded to ``k * size``; other leaves unchanged."""
+        if not (pad and eqx.is_array(x) and x.ndim and x.shape[-1] == B):
+            return x
+        return jnp.concatenate([x, jnp.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
+
+    def chunk(tree, i):
+        """Chunk ``i`` of every vehicle leaf of a padded tree."""
+        return jax.tree.map(lambda x: x[..., i * size:(i + 1) * size] if eqx.is_array(x) and x.ndim
+                            and x.shape[-1] == k * size else x, tree)
+
+    params, values, initial = jax.tree.map(padded, (params, values, initial))
+    parts = [_split(chunk(params, i), kind(profile.t, chunk(values, i)), n_steps, dt, substeps, chunk(initial, i),
+                    False) for i in range(k)]
+    join = lambda *xs: jnp.asarray(np.concatenate([np.asarray(x) for x in xs], axis=-1)[..., :B])  # noqa: E731
+    return Trajectory(parts[0].t, jax.tree.map(join, *[p.state for p in parts]),
+                      {c: join(*[p.channels[c] for p in parts]) for c in parts[0].channels},
+                      join(*[p.voltage for p in parts]), join(*[p.diverged for p in parts]),
+                      join(*[p.t_diverged for p in parts]))
 
 
 def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
