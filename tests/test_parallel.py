@@ -72,7 +72,7 @@ def test_a_large_batch_runs_in_equal_chunks_and_matches_the_whole_batch(monkeypa
     sim = importlib.import_module("trackenv.simulate")
     n = len(parallel.cpu_devices())
     monkeypatch.setattr(parallel, "MAX_PER_DEVICE", 4)
-    monkeypatch.setattr(sim, "CHUNK_ALIGN", 2)
+    monkeypatch.setattr(parallel, "SHARE_ALIGN", 2)
     b = 9 * n + 1  # three chunks of 4 n vehicles after padding (each core's share rounded up to 4)
     rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [0.8, 16, 6], [1.0, 0, 0]], float)
     volts = rows[:, 1:, None] * np.linspace(0.6, 1.2, b)[None, None]

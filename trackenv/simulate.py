@@ -265,7 +265,15 @@ def simulate_core(params, profile: VoltageProfile, state0: State, n_steps: int, 
     return Trajectory(t, states, chans, volts, diverged, t_div)
 
 
-_simulate_jit = jax.jit(simulate_core, static_argnames=("n_steps", "dt", "substeps", "t0", "unroll"))
+def _simulate_in_parts(params, profile, state0: State, n_steps: int, dt: float, substeps: int, t0: float = 0.0,
+                       unroll: int = 1, parts: int = 1) -> Trajectory:
+    """:func:`simulate_core` traced with the contact sums' form for one of ``parts`` equal device shares
+    (:class:`trackenv.physics.sums.Partitioned`; a static argument, so that each form is its own program)."""
+    with sums.Partitioned(parts):
+        return simulate_core(params, profile, state0, n_steps, dt, substeps, t0, unroll)
+
+
+_simulate_jit = jax.jit(_simulate_in_parts, static_argnames=("n_steps", "dt", "substeps", "t0", "unroll", "parts"))
 
 
 def profile_values(profile: VoltageProfile | SpeedProfile) -> jax.Array:
@@ -283,9 +291,10 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     core with no communication. The outputs are gathered back onto the default device with the padding
     dropped, so that nothing split reaches later computations: when the diagnosis kept split outputs, the
     jitted operations that followed mixed split and unsplit arrays and XLA's CPU runtime stalled in a
-    cross-device all-reduce. The contact-point sums take their form from the whole batch's size
-    (:mod:`trackenv.physics.sums`), so a batch of at least ``UNROLL_MAX`` vehicles is padded to at least that
-    many per core, out of the size range where the reduce form is slow. Traced parameters (``jax.jit``,
+    cross-device all-reduce. The program is traced with the contact-point sums' form for one core's share
+    (:class:`trackenv.physics.sums.Partitioned`), and a share of at least ``4 * SHARE_ALIGN`` vehicles is padded
+    to a multiple of ``SHARE_ALIGN``: a share of 63 vehicles ran 1.4-1.7x slower per vehicle than one of 64,
+    189 1.16x slower than 192. Traced parameters (``jax.jit``,
     ``jax.jacfwd``) run unsplit. The results equal the unsplit batch's to float rounding
     (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (docs/performance.md). A batch of
     more than ``MAX_PER_DEVICE`` vehicles per core runs as equal chunks, one after the other (:func:`_in_chunks`).
@@ -306,12 +315,12 @@ def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: Sta
     batch = profile_values(profile).shape[2:]
     n_dev = len(cpu_devices())
     B = batch[0] if len(batch) == 1 else 0
-    padded = B + (-B) % n_dev
-    if padded >= sums.UNROLL_MAX:  # the whole batch sums in XLA's reduce form: keep every core's share in it too
-        padded = max(padded, n_dev * sums.UNROLL_MAX)
-    pad = padded - B
-    if traced or len(batch) != 1 or split_count(padded) == 1:
+    if traced or len(batch) != 1 or split_count(B + (-B) % n_dev) == 1:
         return _run_batch(params, profile, n_steps, dt, substeps, initial)
+    per = -(-B // n_dev)
+    if per >= 4 * parallel.SHARE_ALIGN:  # each core's share vectorised without a remainder (1.2-1.7x, docs/performance.md)
+        per += (-per) % parallel.SHARE_ALIGN
+    pad = n_dev * per - B
     if initial is None:
         initial = initial_state(params, batch)
     if pad:
@@ -323,14 +332,11 @@ def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: Sta
         profile = kind(profile.t, widen(profile_values(profile)))
     params, values, initial = shard((params, profile_values(profile), initial), B + pad, axis=-1)
     t = jax.device_put(profile.t, jax.sharding.NamedSharding(values.sharding.mesh, jax.sharding.PartitionSpec()))
-    traj = _run_batch(params, kind(t, values), n_steps, dt, substeps, initial)
+    traj = _run_batch(params, kind(t, values), n_steps, dt, substeps, initial, parts=n_dev)
     gather = lambda x: jnp.asarray(np.asarray(x)[..., :B])  # noqa: E731  (to the host, back onto the default device)
     return Trajectory(jnp.asarray(np.asarray(traj.t)), jax.tree.map(gather, traj.state),
                       {k: gather(v) for k, v in traj.channels.items()}, gather(traj.voltage), gather(traj.diverged),
                       gather(traj.t_diverged))
-
-
-CHUNK_ALIGN = 16  # vehicles: a chunk's share per core is a multiple of this (vectorised without a remainder loop)
 
 
 def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, n_dev: int) -> Trajectory:
@@ -340,7 +346,7 @@ def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial:
     A core's share of the vehicles is then about as large as the one that runs fastest: per vehicle, a
     batch of 4 096 vehicles (2 048 per core) ran 1.3x slower than chunks of 512, whose working set stays
     in the core's cache (docs/performance.md, "Large batches in chunks"). The batch is padded with copies
-    of its last vehicle to equal chunks, each core's share a multiple of ``CHUNK_ALIGN``, so that one compiled
+    of its last vehicle to equal chunks, each core's share a multiple of ``SHARE_ALIGN``, so that one compiled
     program serves them all; the results equal the unchunked batch's to float rounding (tests/test_parallel.py).
     """
     kind = type(profile)
@@ -350,7 +356,7 @@ def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial:
         initial = initial_state(params, (B,))
     k = -(-B // (n_dev * parallel.MAX_PER_DEVICE))
     per = -(-B // (k * n_dev))
-    size = n_dev * (per + (-per) % CHUNK_ALIGN)  # each core's share a multiple of 16 (an odd share ran 1.12x slower)
+    size = n_dev * (per + (-per) % parallel.SHARE_ALIGN)  # each core's share aligned, as in _split
     pad = k * size - B
 
     def padded(x):
@@ -427,12 +433,13 @@ def simulate_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int,
 
 
 def _run_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int, dt: float, substeps: int,
-               initial: State | None = None, *, t0: float = 0.0, unroll: int = 1) -> Trajectory:
-    """:func:`simulate_batch` on parameters whose shared leaves are already scalars (or are to stay arrays)."""
+               initial: State | None = None, *, t0: float = 0.0, unroll: int = 1, parts: int = 1) -> Trajectory:
+    """:func:`simulate_batch` on parameters whose shared leaves are already scalars (or are to stay arrays);
+    ``parts``: the devices the batch is split over (the contact sums take the form of one device's share)."""
     if initial is None:
         initial = initial_state(params, tuple(profile_values(profile).shape[2:]))
     return _simulate_jit(params, profile, initial, n_steps=n_steps, dt=float(dt), substeps=substeps, t0=t0,
-                         unroll=unroll)
+                         unroll=unroll, parts=parts)
 
 
 def simulate(

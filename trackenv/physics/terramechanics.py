@@ -9,16 +9,17 @@ broadcast shape ``*s``; terrain and vehicle parameter leaves are scalars or ``(*
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..params import Terrain
-from .sums import device_batch
 
 _In = Float[ArrayLike, " *#s"]  # an elementwise argument: broadcasts against the others
 _Out = Float[Array, " *s"]  # the broadcast result
 
-EXP_LOG_POWER_MIN = 64  # vehicles (as counted by device_batch): from here exp(a log x) is faster than pow (measured)
+EXP_LOG_POWER_MIN = 64  # vehicles in the whole batch: from here exp(a log x) is faster than pow (measured)
 
 
 def positive_power(x: _In, a: _In, nb: int = 0) -> _Out:
@@ -26,13 +27,13 @@ def positive_power(x: _In, a: _In, nb: int = 0) -> _Out:
 
     XLA's CPU ``pow`` is not vectorised: on a (2, 14, 256) array it takes about 4.5 ns per element against
     1.3 ns for exp(a log x) (``benchmarks/bench_simulate.py --ops``). From
-    :data:`EXP_LOG_POWER_MIN` vehicles (counted as :func:`trackenv.physics.sums.device_batch` counts them)
-    exp(a log x) makes the batched simulation faster; for one vehicle and small batches ``pow`` does
-    (docs/performance.md). The relative error of exp(a log x)
+    :data:`EXP_LOG_POWER_MIN` vehicles in the whole batch, split over the cores or not, exp(a log x) makes the
+    batched simulation faster; for one vehicle and small batches ``pow`` does (docs/performance.md: split, 32
+    vehicles per core ran 1.15-1.2x faster with exp(a log x), 8 per core 1.15-1.2x slower). The relative error of exp(a log x)
     is about |a log x| units in the last place, ~10⁻⁶ in float32 for the pressures here. The ``where`` on
     both sides keeps the value and the gradient at x = 0 finite (0 and 0).
     """
-    if device_batch(jnp.shape(x), nb) < EXP_LOG_POWER_MIN:
+    if (math.prod(jnp.shape(x)[jnp.ndim(x) - nb:]) if nb else 1) < EXP_LOG_POWER_MIN:
         return jnp.maximum(x, 0.0) ** a
     positive = x > 0.0
     safe = jnp.where(positive, x, 1.0)
