@@ -6,8 +6,8 @@ Runs the diagnosis unchanged (its own fit substep unless ``--substep`` is given)
 ``data/field/thesis`` (the four go-stops and J-turns and both lane changes), without figures, and
 prints the wall time, the verdict, the host devices it had, and how much of the wall time XLA spent
 compiling (JAX's ``/jax/core/compile/backend_compile_duration`` events, :mod:`jax.monitoring`): in all,
-and for the simulation programs (``simulate_core``). No compilation cache is used unless
-``JAX_COMPILATION_CACHE_DIR`` is set. With ``--compare-bucket-fill F`` it then
+and for the simulation programs (``trackenv.simulate._simulate_in_parts``, the jitted ``simulate_core``).
+No compilation cache is used unless ``JAX_COMPILATION_CACHE_DIR`` is set. With ``--compare-bucket-fill F`` it then
 runs the same diagnosis again in the same process with ``trackenv.diagnose.batch.BUCKET_FILL = F`` (the
 rule that decides which tests share a padded batch) and prints both times and the ratio. The default
 rule runs first, so that any warm-up the second run gets favours the alternative.
@@ -37,9 +37,9 @@ def _on_duration(event: str, duration: float, **kw) -> None:
 
 
 def compile_summary(since: int = 0) -> str:
-    """The XLA compilations recorded after the first ``since``: count and seconds, in all and of ``simulate_core``."""
+    """The XLA compilations recorded after the first ``since``: count and seconds, in all and of the simulation core."""
     done = COMPILES[since:]
-    sim = [d for name, d in done if name == "jit(simulate_core)"]
+    sim = [d for name, d in done if name == "jit(_simulate_in_parts)"]
     return (f"compiling {sum(d for _, d in done):.1f} s ({len(done)} programs; {sum(sim):.1f} s of it for "
             f"{len(sim)} simulation programs)")
 
