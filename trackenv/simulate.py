@@ -309,6 +309,14 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     return _split(params, profile, n_steps, dt, substeps, initial, traced)
 
 
+def _pad_vehicles(x, B: int, pad: int):
+    """A leaf with ``B`` vehicles on its last axis, padded with ``pad`` copies of its last vehicle; other leaves
+    (and ``pad`` 0) unchanged."""
+    if not (pad and eqx.is_array(x) and x.ndim and x.shape[-1] == B):
+        return x
+    return jnp.concatenate([x, jnp.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
+
+
 def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, traced: bool) -> Trajectory:
     """The body of :func:`simulate_on_cores` after its shared leaves became scalars: split or not."""
     kind = type(profile)
@@ -325,9 +333,7 @@ def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: Sta
         initial = initial_state(params, batch)
     if pad:
         def widen(x):
-            if not (eqx.is_array(x) and x.ndim and x.shape[-1] == B):
-                return x
-            return jnp.concatenate([x, jnp.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
+            return _pad_vehicles(x, B, pad)
         params, initial = jax.tree.map(widen, (params, initial))
         profile = kind(profile.t, widen(profile_values(profile)))
     params, values, initial = shard((params, profile_values(profile), initial), B + pad, axis=-1)
@@ -360,10 +366,7 @@ def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial:
     pad = k * size - B
 
     def padded(x):
-        """A leaf with the vehicles on its last axis, padded to ``k * size``; other leaves unchanged."""
-        if not (pad and eqx.is_array(x) and x.ndim and x.shape[-1] == B):
-            return x
-        return jnp.concatenate([x, jnp.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
+        return _pad_vehicles(x, B, pad)
 
     def chunk(tree, i):
         """Chunk ``i`` of every vehicle leaf of a padded tree."""
