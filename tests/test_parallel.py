@@ -177,6 +177,55 @@ def test_split_vector_env_sums_in_the_form_of_each_share(monkeypatch):
     np.testing.assert_allclose(out[n // 2][1], out[10**9][1], rtol=1e-5, atol=1e-5)
 
 
+def test_a_large_vector_env_steps_in_equal_chunks_and_matches_one_program(monkeypatch):
+    """Above ``MAX_PER_DEVICE`` environments per core the batched program steps equal chunks (the last padded
+    with copies of its last environment), each split over the cores; observations, rewards, flags, the
+    autoreset's final observations, a masked reset and the state keep every environment in its place and
+    equal the one program's to float rounding."""
+    from trackenv.envs import vector
+
+    n = len(parallel.cpu_devices())
+    monkeypatch.setattr(parallel, "SHARE_ALIGN", 2)
+    monkeypatch.setattr(parallel, "MIN_ENVS_PER_DEVICE", 2)
+    b = 9 * n + 1  # three chunks of 4 n environments after padding
+    a = np.stack([np.linspace(4.0, 16.0, b), np.linspace(14.0, 2.0, b)], axis=1).astype(np.float32)
+    mask = np.arange(b) % 3 == 1
+    out, calls = {}, []
+    step = vector.TrackVectorEnv._joined
+
+    def counting(self, outs):
+        outs = list(outs)
+        calls.append([o[0].shape[0] for o in outs])
+        return step(self, outs)
+    monkeypatch.setattr(vector.TrackVectorEnv, "_joined", counting)
+    for per in (4, 10**9):
+        monkeypatch.setattr(parallel, "MAX_PER_DEVICE", per)
+        venv = vector.TrackVectorEnv("go_stop", b, autoreset_mode="same_step", substep=0.002, physics_batching="vmap",
+                                     max_time=0.15)
+        venv.reset(seed=3)
+        steps = [venv.step(a) for _ in range(3)]  # the episodes end at the third step
+        obs_m, _ = venv.reset(options={"reset_mask": mask})
+        out[per] = steps, obs_m, venv.state, venv._chunk
+    assert out[4][3] == 4 * n and out[10**9][3] == b
+    assert calls[:5] == [[4 * n] * 3] * 5 and calls[5:] == [[b]] * 5
+    (chunked, obs_c, state_c, _), (whole, obs_w, state_w, _) = out[4], out[10**9]
+    assert np.ptp(whole[1][1]) > 1e-3  # the environments differ: a shifted row would show
+    for (oc, rc, tc, uc, ic), (ow, rw, tw, uw, iw) in zip(chunked, whole):
+        assert oc.shape == ow.shape == (b, ow.shape[1])
+        np.testing.assert_allclose(oc, ow, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(rc, rw, rtol=1e-5, atol=1e-5)
+        np.testing.assert_array_equal(tc, tw)
+        np.testing.assert_array_equal(uc, uw)
+        np.testing.assert_allclose(ic["energy"], iw["energy"], rtol=1e-5, atol=1e-6)
+    assert chunked[-1][3].all() and "final_obs" in chunked[-1][4]  # every episode ended at the third step
+    np.testing.assert_allclose(np.stack(chunked[-1][4]["final_obs"]), np.stack(whole[-1][4]["final_obs"]), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(obs_c, obs_w, rtol=1e-5, atol=1e-5)
+    for x, y in zip(jax.tree.leaves(state_c), jax.tree.leaves(state_w)):
+        assert x.shape == y.shape and x.shape[0] == b
+        if y.size:
+            np.testing.assert_allclose(x, y, rtol=1e-4, atol=1e-4 * (np.abs(y).max() + 1e-12))
+
+
 def _simulate_script(out):
     return ("import numpy as np, trackenv as te\n"
             "rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [1.0, 16, 6], [1.5, 0, 0], [2.0, 0, 0]], float)\n"

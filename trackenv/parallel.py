@@ -43,7 +43,7 @@ import re
 
 MIN_PER_DEVICE = 4  # vehicles per core below which a simulation batch is not split (measured, docs/performance.md)
 SHARE_ALIGN = 8  # vehicles: a split batch's share per core is padded to a multiple of this (from 4x it; measured, docs/performance.md)
-MAX_PER_DEVICE = 320  # vehicles per core above which a simulation batch runs in chunks (cache-sized; measured, docs/performance.md)
+MAX_PER_DEVICE = 320  # per core: a larger simulation batch, or batched vector env, runs in chunks (cache-sized; docs/performance.md)
 MIN_ENVS_PER_DEVICE = 128  # the same for the vector env's batched program, whose state stays split between steps (measured, README)
 MIN_ROWS_PER_DEVICE = 16  # the same for run_split's row loops, which gain from far fewer (measured, README)
 MAX_HOST_DEVICES = 8

@@ -1,8 +1,8 @@
 """Native batched environments: a ``gymnasium.vector.VectorEnv`` and a Stable-Baselines3 ``VecEnv``.
 
-:class:`TrackVectorEnv` steps N environments in **one** jitted call (per host device) of the
-functional core with Gymnasium's autoreset built in, followed by **one** device-to-host transfer of
-an (N, K) float32 array::
+:class:`TrackVectorEnv` steps N environments in **one** jitted call (per host device; per chunk of a
+large batch) of the functional core with Gymnasium's autoreset built in, followed by **one**
+device-to-host transfer of an (N, K) float32 array::
 
     venv = gym.make_vec("trackenv/GoStop-v0", num_envs=1024, autoreset_mode="same_step")
     obs, info = venv.reset(seed=0)                   # env i starts as gym.make(...).reset(seed=0 + i)
@@ -29,7 +29,9 @@ an (N, K) float32 array::
   to the integrator with the batch on the *last* axis of every array, docs/model.md §6, through
   ``jax.custom_batching.custom_vmap``) or ``"auto"`` (vmap below 256 environments, native from 256,
   split over the host devices from ``parallel.MIN_ENVS_PER_DEVICE`` = 128 per device, traced with the
-  contact sums' form for one device's share, :class:`trackenv.physics.sums.Partitioned`): one batched program, 1.3-2.9x the throughput of
+  contact sums' form for one device's share, :class:`trackenv.physics.sums.Partitioned`; above
+  ``parallel.MAX_PER_DEVICE`` = 320 environments per device it steps equal chunks one after the other,
+  :func:`chunk_size`): one batched program, 1.3-2.9x the throughput of
   ``"loop"`` from 64 environments (docs/performance.md), but XLA compiles its float32 arithmetic
   differently for each batch shape, so a sub-environment only agrees with the single env to rounding
   (~1e-7 after one step, growing to ~1-3 % of a channel's range within 1.5 s; README Reliability).
@@ -125,6 +127,29 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
     return fns
 
 
+def chunk_size(num_envs: int) -> int:
+    """Environments per call of the batched program: all of them, or, above ``parallel.MAX_PER_DEVICE``
+    environments per core, equal chunks of at most that many per core, each core's share a multiple of
+    ``parallel.SHARE_ALIGN`` (the last chunk padded with copies of its last environment).
+
+    As for ``simulate``'s batches (``trackenv.simulate._in_chunks``), a core's share then stays about as large
+    as the one that runs fastest: 4 096 environments stepped 1.4x faster as chunks than as one program
+    (docs/performance.md, "The vector env in chunks").
+    """
+    n_dev = len(parallel.cpu_devices())
+    if num_envs <= n_dev * parallel.MAX_PER_DEVICE:
+        return num_envs
+    k = -(-num_envs // (n_dev * parallel.MAX_PER_DEVICE))
+    per = -(-num_envs // (k * n_dev))
+    return n_dev * (per + (-per) % parallel.SHARE_ALIGN)
+
+
+def _pad_rows(x: np.ndarray, size: int) -> np.ndarray:
+    """``x`` (n, ...) with ``size - n`` copies of its last row appended."""
+    pad = size - x.shape[0]
+    return x if pad == 0 else np.concatenate([x, np.repeat(x[-1:], pad, axis=0)])
+
+
 class TrackVectorEnv(VectorEnv):
     """N PackBots on one task, stepped by one jitted call per step (see the module docstring)."""
 
@@ -176,7 +201,8 @@ class TrackVectorEnv(VectorEnv):
         else:
             self._vreset, self._vreset_masked, self._vstep = jitted(self._scodec, self._pcodec)
             self._split_from = parallel.MIN_ENVS_PER_DEVICE  # read once: the split and the traced sums agree
-            self._parts = parallel.split_count(self.num_envs, self._split_from)
+            self._chunk = chunk_size(self.num_envs)
+            self._parts = parallel.split_count(self._chunk, self._split_from)
         self._sf = self._si = None
         self._last_host = None
         example = self._scodec.unravel_host(np.zeros(self._scodec.n_float, np.float32), np.zeros(self._scodec.n_int, np.int32))
@@ -207,9 +233,28 @@ class TrackVectorEnv(VectorEnv):
         return np.asarray([episode_seed(s) for s in seed], np.uint32)
 
     def _on_cores(self, x):
-        """``x`` (num_envs, ...) split over the host devices for the batched program (one half per core from
+        """``x`` (chunk, ...) split over the host devices for the batched program (one half per core from
         ``MIN_ENVS_PER_DEVICE`` environments per core), else unchanged."""
-        return shard(x, self.num_envs, 0, self._split_from)
+        return shard(x, self._chunk, 0, self._split_from)
+
+    def _chunks(self, x: np.ndarray) -> list:
+        """``x`` (num_envs, ...) as the batched program's chunks (:func:`chunk_size`), each padded and on the cores."""
+        c = self._chunk
+        return [self._on_cores(_pad_rows(np.asarray(x[i:i + c]), c)) for i in range(0, self.num_envs, c)]
+
+    def _joined(self, outs) -> tuple:
+        """The chunks' (state float, state int, packed) outputs: the states kept per chunk on the devices, the
+        packed rows joined on the host (padding dropped)."""
+        sf, si, packed = zip(*outs)
+        host = np.concatenate([np.asarray(p) for p in packed])[: self.num_envs]
+        return list(sf), list(si), host
+
+    def _host_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The flat state (num_envs, n_float), (num_envs, n_int) as numpy arrays."""
+        if self._loop:
+            return np.asarray(self._sf), np.asarray(self._si)
+        return (np.concatenate([np.asarray(x) for x in self._sf])[: self.num_envs],
+                np.concatenate([np.asarray(x) for x in self._si])[: self.num_envs])
 
     def reset(self, *, seed=None, options: dict | None = None):
         super().reset(seed=seed if isinstance(seed, (int, np.integer)) else None)
@@ -233,14 +278,16 @@ class TrackVectorEnv(VectorEnv):
             self._sf, self._si, packed = run_split(
                 self._reset_rows, (sf, si, seeds, np.ones(self.num_envs, bool) if mask is None else mask),
                 self._rows_shared, self._row_devices)
+            host = np.array(packed)
         elif mask is not None:
-            self._sf, self._si, packed = self._vreset_masked(self._sf, self._si, self._on_cores(seeds), self._on_cores(mask),
-                                                             self._pf, self._pi,
-                                                             with_physics=self.info_state, final=self._final, parts=self._parts)
+            self._sf, self._si, host = self._joined(
+                self._vreset_masked(sf, si, s, m, self._pf, self._pi, with_physics=self.info_state, final=self._final,
+                                    parts=self._parts)
+                for sf, si, s, m in zip(self._sf, self._si, self._chunks(seeds), self._chunks(mask)))
         else:
-            self._sf, self._si, packed = self._vreset(self._on_cores(seeds), self._pf, self._pi,
-                                                      with_physics=self.info_state, final=self._final, parts=self._parts)
-        host = np.array(packed)
+            self._sf, self._si, host = self._joined(
+                self._vreset(s, self._pf, self._pi, with_physics=self.info_state, final=self._final, parts=self._parts)
+                for s in self._chunks(seeds))
         if mask is not None:  # environments that were not reset keep their last observation and info
             host = np.where(mask[:, None], host, self._last_host)
         self._last_host = host
@@ -273,11 +320,12 @@ class TrackVectorEnv(VectorEnv):
         if self._loop:
             self._sf, self._si, packed = run_split(self._step_rows, (self._sf, self._si, a),
                                                    (self._mode_index,) + self._rows_shared, self._row_devices)
-        else:
-            self._sf, self._si, packed = self._vstep(self._sf, self._si, self._on_cores(a),
-                                                     self._pf, self._pi, mode=self._mode,
-                                                     with_physics=self.info_state, final=self._final, parts=self._parts)
-        host = np.array(packed)  # the one device-to-host transfer
+            host = np.array(packed)  # the one device-to-host transfer
+        else:  # one call and one transfer per chunk (one chunk below MAX_PER_DEVICE environments per core)
+            self._sf, self._si, host = self._joined(
+                self._vstep(sf, si, ac, self._pf, self._pi, mode=self._mode, with_physics=self.info_state,
+                            final=self._final, parts=self._parts)
+                for sf, si, ac in zip(self._sf, self._si, self._chunks(a)))
         self._last_host = host
         lay = self._layout
         rewards = host[:, lay.reward].astype(np.float64)
@@ -320,7 +368,8 @@ class TrackVectorEnv(VectorEnv):
 
         if self._sf is None:
             raise RuntimeError("call reset() before render()")
-        one = self._scodec.unravel_host(np.asarray(self._sf[i]), np.asarray(self._si[i]))
+        sf, si = self._host_state()
+        one = self._scodec.unravel_host(sf[i], si[i])
         drawing = self.params.task.drawing(one.task)
         info = {"time": float(one.steps) * self.params.control_dt,
                 "state": {"pose": np.asarray(one.physics.pose), "vel": np.asarray(one.physics.vel),
@@ -367,7 +416,7 @@ class TrackVectorEnv(VectorEnv):
         """The batched :class:`~trackenv.envs.core.EnvState` as numpy arrays (leading N axis; a copy)."""
         if self._sf is None:
             return None
-        return self._scodec.unravel_host(np.asarray(self._sf), np.asarray(self._si), batch=(self.num_envs,))
+        return self._scodec.unravel_host(*self._host_state(), batch=(self.num_envs,))
 
     def physical_state(self) -> dict[str, np.ndarray]:
         """The full physical state of every environment (numpy, leading N axis), on demand."""
