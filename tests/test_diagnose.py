@@ -689,7 +689,24 @@ def test_near_limit_summary_counts_only_cases_in_the_window(tmp_path):
     _write(tmp_path, rows, 0, {})
     md = (tmp_path / "benchmark.md").read_text()
     assert "near-limit effect cases named correctly: 2 / 3; of them 2 landed in the 1-3 σ window" in md
-    assert "named 1 / 2" in md and "null cases flagged: **0 / 1**" in md and "(4 / 5)" in md
+    assert "named 1 / 2" in md and "null cases flagged: **0 / 1** (the false-positive rate is below 0.950" in md and "(4 / 5)" in md
+
+
+def test_the_null_false_positive_bound_is_clopper_pearson():
+    """The benchmark bounds the null false-positive rate one-sided at 95 %: with none flagged, n = 59 null cases are
+    the fewest that bound it at 0.05 (0.95^59 < 0.05 < 0.95^58); one flagged in 8 allows up to 47 %."""
+    from trackenv.diagnose.benchmark import rate_upper_bound, summarize
+
+    assert rate_upper_bound(0, 59) < 0.05 < rate_upper_bound(0, 58)
+    assert rate_upper_bound(0, 8) == pytest.approx(1 - 0.05 ** (1 / 8), rel=1e-9)  # 0.312
+    assert rate_upper_bound(1, 8) == pytest.approx(0.4707, abs=1e-3)
+    assert rate_upper_bound(3, 3) == 1.0 and rate_upper_bound(0, 0) is None
+    rows = [{"label": "none", "verdict": v, "shrink": 0.0, "true_effect_shrink": None, "wall_s": 1.0}
+            for v in ["none"] * 19 + ["slip_sinkage"]]
+    s = summarize(rows)
+    assert s["null_flagged"] == 1 and s["null_false_positive_rate"] == 0.05
+    bound = s["null_false_positive_rate_upper95"]
+    assert bound == pytest.approx(rate_upper_bound(1, 20)) and 0.2 < bound < 0.25
 
 
 def test_blind_benchmark_small(tmp_path):

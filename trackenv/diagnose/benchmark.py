@@ -32,6 +32,16 @@ LABELS = ("slip_sinkage", "lateral_friction_radius", "internal_resistance", "gro
           "sensor_artifacts", NONE)
 
 
+def rate_upper_bound(k: int, n: int, level: float = 0.95) -> float | None:
+    """One-sided Clopper-Pearson upper bound of a rate seen ``k`` times in ``n`` trials: the largest rate
+    under which ``k`` or fewer would be seen with probability at least 1 - ``level`` (0/59 → 0.050)."""
+    from scipy.stats import beta  # noqa: PLC0415
+
+    if n <= 0:
+        return None
+    return 1.0 if k >= n else float(beta.ppf(level, k + 1, n - k))
+
+
 def summarize(rows: list[dict]) -> dict:
     conf = {a: {b: 0 for b in LABELS} for a in LABELS}
     for r in rows:
@@ -47,6 +57,7 @@ def summarize(rows: list[dict]) -> dict:
         "cases": n, "correct": len(correct), "top1_accuracy": len(correct) / n if n else None,
         "null_cases": len(nulls), "null_flagged": flagged,
         "null_false_positive_rate": flagged / len(nulls) if nulls else None,
+        "null_false_positive_rate_upper95": rate_upper_bound(flagged, len(nulls)),
         "effect_cases": n - len(nulls),
         "effect_recall": (sum(r["verdict"] == r["label"] for r in rows if r["label"] != NONE) / (n - len(nulls)))
         if n > len(nulls) else None,
@@ -250,7 +261,10 @@ def _write(out: Path, rows: list[dict], seed: int, timing: dict) -> dict:
          f"limit), seed {seed}; effects in forms different from the candidate library (trackenv/diagnose/blind.py); "
          "labels withheld from the diagnosis.", "",
          f"- top-1 accuracy: **{summary['top1_accuracy']:.2f}** ({summary['correct']} / {summary['cases']})",
-         f"- null cases flagged: **{summary['null_flagged']} / {summary['null_cases']}**",
+         f"- null cases flagged: **{summary['null_flagged']} / {summary['null_cases']}**"
+         + ("" if not summary["null_cases"] else
+            f" (the false-positive rate is below {summary['null_false_positive_rate_upper95']:.3f}: one-sided 95 %, "
+            "Clopper-Pearson)"),
          f"- median held-out gap shrink when right: **{'–' if med is None else f'{med:.2f}'}** (from the base model; "
          f"the effect's own part, beyond recalibrating the base: {'–' if own_med is None else f'{own_med:.2f}'})",
          f"- median held-out gap shrink of the true label's candidate, every effect case: "
