@@ -709,6 +709,20 @@ def test_the_null_false_positive_bound_is_clopper_pearson():
     assert bound == pytest.approx(rate_upper_bound(1, 20)) and 0.2 < bound < 0.25
 
 
+def test_a_benchmark_of_null_cases_only_writes_its_report(tmp_path):
+    """A false-positive calibration (every label ``none``) has no power to plot; its report and figures are still
+    written, with the bound."""
+    from trackenv.diagnose.benchmark import _write
+
+    rows = [{"case": f"c{i}", "label": "none", "verdict": "none", "confidence": 0.5, "shrink": 0.0, "own_shrink": None,
+             "insample_shrink": 0.0, "true_effect_shrink": None, "visibility": None, "near_limit": False,
+             "maneuvers": ["go_stop"], "terrain": "asphalt", "reason": "r", "wall_s": 1.0} for i in range(60)]
+    _write(tmp_path, rows, 1, {})
+    md = (tmp_path / "benchmark.md").read_text()
+    assert "null cases flagged: **0 / 60** (the false-positive rate is below 0.049" in md
+    assert (tmp_path / "power.png").stat().st_size > 1000 and (tmp_path / "confusion.png").exists()
+
+
 def test_blind_benchmark_small(tmp_path):
     from trackenv.diagnose.benchmark import run_benchmark
 
