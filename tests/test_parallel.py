@@ -226,6 +226,21 @@ def test_a_large_vector_env_steps_in_equal_chunks_and_matches_one_program(monkey
             np.testing.assert_allclose(x, y, rtol=1e-4, atol=1e-4 * (np.abs(y).max() + 1e-12))
 
 
+def test_batches_are_chunked_on_a_cpu_only(monkeypatch):
+    """Chunks keep a CPU core's share in its cache; an accelerator gets the whole batch in one program."""
+    from trackenv.envs.vector import chunk_size
+
+    n = len(parallel.cpu_devices())
+    assert parallel.chunk_limit() == parallel.MAX_PER_DEVICE
+    assert chunk_size(n * parallel.MAX_PER_DEVICE) == n * parallel.MAX_PER_DEVICE  # at the limit: one chunk
+    big = 4096 * n
+    c = chunk_size(big)
+    assert c < big and c % (n * parallel.SHARE_ALIGN) == 0 and c <= n * parallel.MAX_PER_DEVICE
+    assert -(-big // c) * c - big < c  # the padding is less than one chunk
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert parallel.chunk_limit() is None and chunk_size(big) == big
+
+
 def _simulate_script(out):
     return ("import numpy as np, trackenv as te\n"
             "rows = np.array([[0, 0, 0], [0.3, 11.8, 11.8], [1.0, 16, 6], [1.5, 0, 0], [2.0, 0, 0]], float)\n"

@@ -107,6 +107,14 @@ def cpu_devices():
     return [d for d in jax.devices() if d.platform == "cpu"] or jax.devices()
 
 
+def chunk_limit() -> int | None:
+    """Vehicles (environments) per device above which a batch runs in chunks: ``MAX_PER_DEVICE`` on a CPU,
+    where a core's share should stay in its cache; None (never chunked) on an accelerator, which wants the
+    whole batch at once."""
+    import jax
+    return MAX_PER_DEVICE if jax.default_backend() == "cpu" else None
+
+
 def split_count(batch: int, min_per_device: int | None = None) -> int:
     """How many devices a batch of ``batch`` vehicles is split over (1: not split).
 

@@ -297,15 +297,17 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     189 1.16x slower than 192. Traced parameters (``jax.jit``,
     ``jax.jacfwd``) run unsplit. The results equal the unsplit batch's to float rounding
     (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (docs/performance.md). A batch of
-    more than ``MAX_PER_DEVICE`` vehicles per core runs as equal chunks, one after the other (:func:`_in_chunks`).
+    more than ``MAX_PER_DEVICE`` vehicles per core runs as equal chunks, one after the other (:func:`_in_chunks`; on
+    a CPU only: :func:`trackenv.parallel.chunk_limit`).
     """
     batch = profile_values(profile).shape[2:]
     params = shared_leaves_as_scalars(params, tuple(batch))
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((params, profile, initial)))
     n_dev = len(cpu_devices())
     B = batch[0] if len(batch) == 1 else 0
-    if not traced and B > n_dev * parallel.MAX_PER_DEVICE:
-        return _in_chunks(params, profile, n_steps, dt, substeps, initial, n_dev)
+    limit = parallel.chunk_limit()
+    if not traced and limit is not None and B > n_dev * limit:
+        return _in_chunks(params, profile, n_steps, dt, substeps, initial, n_dev, limit)
     return _split(params, profile, n_steps, dt, substeps, initial, traced)
 
 
@@ -345,7 +347,8 @@ def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: Sta
                       gather(traj.t_diverged))
 
 
-def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, n_dev: int) -> Trajectory:
+def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, n_dev: int,
+               limit: int) -> Trajectory:
     """:func:`simulate_on_cores` of a large one-axis batch as equal chunks of at most ``MAX_PER_DEVICE``
     vehicles per core, one after the other, each split over the cores; the outputs joined on the host.
 
@@ -360,7 +363,7 @@ def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial:
     B = values.shape[-1]
     if initial is None:
         initial = initial_state(params, (B,))
-    k = -(-B // (n_dev * parallel.MAX_PER_DEVICE))
+    k = -(-B // (n_dev * limit))
     per = -(-B // (k * n_dev))
     size = n_dev * (per + (-per) % parallel.SHARE_ALIGN)  # each core's share aligned, as in _split
     pad = k * size - B

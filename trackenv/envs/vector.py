@@ -136,10 +136,10 @@ def chunk_size(num_envs: int) -> int:
     as the one that runs fastest: 4 096 environments stepped 1.4x faster as chunks than as one program
     (docs/performance.md, "The vector env in chunks").
     """
-    n_dev = len(parallel.cpu_devices())
-    if num_envs <= n_dev * parallel.MAX_PER_DEVICE:
+    n_dev, limit = len(parallel.cpu_devices()), parallel.chunk_limit()
+    if limit is None or num_envs <= n_dev * limit:  # an accelerator steps the whole batch at once
         return num_envs
-    k = -(-num_envs // (n_dev * parallel.MAX_PER_DEVICE))
+    k = -(-num_envs // (n_dev * limit))
     per = -(-num_envs // (k * n_dev))
     return n_dev * (per + (-per) % parallel.SHARE_ALIGN)
 
