@@ -228,7 +228,7 @@ def test_a_large_vector_env_steps_in_equal_chunks_and_matches_one_program(monkey
 
 def test_batches_are_chunked_on_a_cpu_only(monkeypatch):
     """Chunks keep a CPU core's share in its cache; an accelerator gets the whole batch in one program."""
-    from trackenv.envs.vector import chunk_size
+    from trackenv.parallel import chunk_size
 
     n = len(parallel.cpu_devices())
     assert parallel.chunk_limit() == parallel.MAX_PER_DEVICE

@@ -115,6 +115,18 @@ def chunk_limit() -> int | None:
     return MAX_PER_DEVICE if jax.default_backend() == "cpu" else None
 
 
+def chunk_size(batch: int) -> int:
+    """Vehicles (environments) per chunk of a batch: the whole batch, or, above :func:`chunk_limit` per device,
+    equal chunks of at most that many per device, each device's share a multiple of ``SHARE_ALIGN`` (the last
+    chunk padded by the caller). One rule for ``simulate``'s batches and the batched vector env."""
+    n_dev, limit = len(cpu_devices()), chunk_limit()
+    if limit is None or batch <= n_dev * limit:  # an accelerator takes the whole batch at once
+        return batch
+    k = -(-batch // (n_dev * limit))
+    per = -(-batch // (k * n_dev))
+    return n_dev * (per + (-per) % SHARE_ALIGN)
+
+
 def split_count(batch: int, min_per_device: int | None = None) -> int:
     """How many devices a batch of ``batch`` vehicles is split over (1: not split).
 

@@ -303,11 +303,10 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     batch = profile_values(profile).shape[2:]
     params = shared_leaves_as_scalars(params, tuple(batch))
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((params, profile, initial)))
-    n_dev = len(cpu_devices())
     B = batch[0] if len(batch) == 1 else 0
-    limit = parallel.chunk_limit()
-    if not traced and limit is not None and B > n_dev * limit:
-        return _in_chunks(params, profile, n_steps, dt, substeps, initial, n_dev, limit)
+    size = parallel.chunk_size(B)
+    if not traced and size < B:
+        return _in_chunks(params, profile, n_steps, dt, substeps, initial, size)
     return _split(params, profile, n_steps, dt, substeps, initial, traced)
 
 
@@ -347,8 +346,8 @@ def _split(params, profile, n_steps: int, dt: float, substeps: int, initial: Sta
                       gather(traj.t_diverged))
 
 
-def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None, n_dev: int,
-               limit: int) -> Trajectory:
+def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial: State | None,
+               size: int) -> Trajectory:
     """:func:`simulate_on_cores` of a large one-axis batch as equal chunks of at most ``MAX_PER_DEVICE``
     vehicles per core, one after the other, each split over the cores; the outputs joined on the host.
 
@@ -363,9 +362,7 @@ def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial:
     B = values.shape[-1]
     if initial is None:
         initial = initial_state(params, (B,))
-    k = -(-B // (n_dev * limit))
-    per = -(-B // (k * n_dev))
-    size = n_dev * (per + (-per) % parallel.SHARE_ALIGN)  # each core's share aligned, as in _split
+    k = -(-B // size)  # chunks of trackenv.parallel.chunk_size(B) vehicles
     pad = k * size - B
 
     def padded(x):

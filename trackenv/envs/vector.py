@@ -31,7 +31,7 @@ device-to-host transfer of an (N, K) float32 array::
   split over the host devices from ``parallel.MIN_ENVS_PER_DEVICE`` = 128 per device, traced with the
   contact sums' form for one device's share, :class:`trackenv.physics.sums.Partitioned`; above
   ``parallel.MAX_PER_DEVICE`` = 320 environments per device it steps equal chunks one after the other,
-  :func:`chunk_size`): one batched program, 1.3-2.9x the throughput of
+  :func:`trackenv.parallel.chunk_size`): one batched program, 1.3-2.9x the throughput of
   ``"loop"`` from 64 environments (docs/performance.md), but XLA compiles its float32 arithmetic
   differently for each batch shape, so a sub-environment only agrees with the single env to rounding
   (~1e-7 after one step, growing to ~1-3 % of a channel's range within 1.5 s; README Reliability).
@@ -127,23 +127,6 @@ def jitted(scodec: FlatCodec, pcodec: FlatCodec):
     return fns
 
 
-def chunk_size(num_envs: int) -> int:
-    """Environments per call of the batched program: all of them, or, above ``parallel.MAX_PER_DEVICE``
-    environments per core, equal chunks of at most that many per core, each core's share a multiple of
-    ``parallel.SHARE_ALIGN`` (the last chunk padded with copies of its last environment).
-
-    As for ``simulate``'s batches (``trackenv.simulate._in_chunks``), a core's share then stays about as large
-    as the one that runs fastest: 4 096 environments stepped 1.4x faster as chunks than as one program
-    (docs/performance.md, "The vector env in chunks").
-    """
-    n_dev, limit = len(parallel.cpu_devices()), parallel.chunk_limit()
-    if limit is None or num_envs <= n_dev * limit:  # an accelerator steps the whole batch at once
-        return num_envs
-    k = -(-num_envs // (n_dev * limit))
-    per = -(-num_envs // (k * n_dev))
-    return n_dev * (per + (-per) % parallel.SHARE_ALIGN)
-
-
 def _pad_rows(x: np.ndarray, size: int) -> np.ndarray:
     """``x`` (n, ...) with ``size - n`` copies of its last row appended."""
     pad = size - x.shape[0]
@@ -201,7 +184,7 @@ class TrackVectorEnv(VectorEnv):
         else:
             self._vreset, self._vreset_masked, self._vstep = jitted(self._scodec, self._pcodec)
             self._split_from = parallel.MIN_ENVS_PER_DEVICE  # read once: the split and the traced sums agree
-            self._chunk = chunk_size(self.num_envs)
+            self._chunk = parallel.chunk_size(self.num_envs)  # 4 096 environments: 1.4-1.6x faster as chunks
             self._parts = parallel.split_count(self._chunk, self._split_from)
         self._sf = self._si = None
         self._last_host = None
@@ -238,7 +221,8 @@ class TrackVectorEnv(VectorEnv):
         return shard(x, self._chunk, 0, self._split_from)
 
     def _chunks(self, x: np.ndarray) -> list:
-        """``x`` (num_envs, ...) as the batched program's chunks (:func:`chunk_size`), each padded and on the cores."""
+        """``x`` (num_envs, ...) as the batched program's chunks (:func:`trackenv.parallel.chunk_size`), each padded and
+        on the cores."""
         c = self._chunk
         return [self._on_cores(_pad_rows(np.asarray(x[i:i + c]), c)) for i in range(0, self.num_envs, c)]
 
