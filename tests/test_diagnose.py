@@ -227,14 +227,15 @@ def test_paired_test_controls_the_null_and_finds_a_better_model():
     assert worse["p"] > 0.99
 
 
-def _evidence(errors: dict, sigma: float = 0.1) -> dict:
+def _evidence(errors: dict, sigma: float = 0.1, insample: dict | None = None) -> dict:
     """Verdict evidence (:func:`trackenv.diagnose.core.evidence`'s layout) for one test, one channel of white
-    noise σ, from each candidate's signed held-out errors."""
+    noise σ, from each candidate's signed held-out errors (and in-sample errors, by default the held-out ones)."""
     w = 1.0 / sigma**2
     ws = {n: [w * e**2] for n, e in errors.items()}
+    ws_full = ws if insample is None else {n: [w * e**2] for n, e in insample.items()}
     loss = {n: float(np.mean(x[0])) for n, x in ws.items()}
     return {"gap_p": 1e-10, "noise": [{"speed": (sigma, 0.0)}], "weights": [{"speed": w}],
-            "err_held": {n: [{"speed": e}] for n, e in errors.items()}, "ws_held": ws,
+            "err_held": {n: [{"speed": e}] for n, e in errors.items()}, "ws_held": ws, "ws_full": ws_full,
             "candidates": {n: {"heldout_loss": loss[n], "n_params": 0 if n == "none" else 3,
                                "is_effect": n not in ("none", "recalibrate_base"),
                                "heldout_gap": float(np.sqrt(max(loss[n] - 1, 0))),
@@ -337,6 +338,29 @@ def test_an_effect_on_the_base_is_named_where_its_fit_on_the_control_inherits_a_
     errors["sensor_artifacts@base"] = 0.02 + n
     v = decide(_evidence(errors, sigma))
     assert v["effect"] == "sensor_artifacts" and v["member"] == "sensor_artifacts@base", v
+
+
+def test_an_effect_that_only_beats_a_badly_extrapolating_control_is_not_named():
+    """Null case: the control's family holds the truth and fits all the data as well as the effect does, but its
+    fit on a test's head drifts on the tail, so the effect beats it on the held-out samples (conditions 2-3 on
+    held-out data pass). It does not fit all the data better (3b), so nothing is named. Where the effect also
+    removes a bias that the control leaves in-sample, it is named."""
+    from trackenv.diagnose.core import decide
+
+    rng = np.random.default_rng(5)
+    K, sigma = 3000, 0.1
+    n, m = sigma * rng.standard_normal(K), sigma * rng.standard_normal(K)
+    drift = np.linspace(0.0, 0.5, K)
+    held = {"none": 0.1 + n, "recalibrate_base": drift + n, "slip_sinkage": 0.01 + n}
+    tied = {"none": 0.1 + m, "recalibrate_base": 0.005 * np.sin(np.arange(K) / 50) + m, "slip_sinkage": 0.01 + m}
+    v = decide(_evidence(held, sigma, insample=tied))
+    assert v["tests"]["slip_sinkage vs recalibrate_base (Diebold-Mariano)"] < 0.05
+    assert v["tests"]["slip_sinkage vs recalibrate_base (in-sample)"] >= 0.05
+    assert v["effect"] == "none" and "does not fit all the data better" in v["reason"], v
+    better = {**tied, "recalibrate_base": 0.05 + m}
+    v = decide(_evidence(held, sigma, insample=better))
+    assert v["effect"] == "slip_sinkage", v
+    assert v["tests"]["slip_sinkage vs recalibrate_base (in-sample)"] < 1e-3
 
 
 def test_a_physical_effect_that_predicts_better_does_not_hand_the_verdict_to_the_instruments():
@@ -738,6 +762,8 @@ def test_blind_benchmark_small(tmp_path):
 
     again = rescore(tmp_path)
     assert [r["verdict"] for r in again["rows"]] == [r["verdict"] for r in res["cases"]]
+    # with the run's confidence: the same analysis flags (not converged, single test) lower it
+    assert [r["confidence"] for r in again["rows"]] == pytest.approx([r["confidence"] for r in res["cases"]], abs=1e-9)
     # the label never reaches the case folders
     for f in (tmp_path / "cases").rglob("*.json"):
         assert "lateral_friction" not in f.read_text() and "slip_sinkage" not in f.read_text()

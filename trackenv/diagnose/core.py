@@ -69,8 +69,9 @@ RULE_TEXT = (
     "tried in the order of their held-out scores; the effect of the first for which all "
     "of these hold is named, each at alpha = 0.05 (an intersection-union rule: naming an "
     "effect when none beats the base model, or when tuning the base parameters does as well, has probability "
-    "<= alpha, if the fitted control does as well as tuning can, which it does not always: on 68 null blind "
-    "cases 4 were named, docs/diagnose_benchmark.md; the max-T corrections make trying every effect no more "
+    "<= alpha, if the fitted control does as well as tuning can, which it does not always (condition 3b guards "
+    "against that; docs/diagnose_benchmark.md measures the rate on null blind cases); the max-T corrections make "
+    "trying every effect no more "
     "likely to name one under the null): "
     "(1) the base model's gap is real: the AR(1)-noise chi-square test of its residuals, "
     "Bonferroni-combined over test x signal, has p < alpha; (2) the effect "
@@ -79,14 +80,17 @@ RULE_TEXT = (
     "(p < alpha); (3) it beats the `recalibrate_base` control the same way (max-T over the effects, p < alpha) and also by "
     "a Diebold-Mariano test on Huber losses (k = 1.345 noise units per channel sample; Newey-West variance, "
     "bandwidth >= 2 correlation times of the loss differential, p < alpha), else the verdict is `none`: a gap "
-    "that tuning closes; (4) a physical effect that does not beat "
+    "that tuning closes; (3b) one of the effect's fits on all the data (on the control or on the base) fits them "
+    "better than the control's fit on all the data (Diebold-Mariano on the Huber loss of each sample's in-sample "
+    "term, p < alpha), else `none`: a held-out win over a control that extrapolated worse while fitting as well "
+    "is not evidence of an effect; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
-    "itself passes (2)-(3) and predicts the held-out data at least as well (held-out score); if it predicts them "
+    "itself passes (2)-(3b) and predicts the held-out data at least as well (held-out score); if it predicts them "
     "worse, the data do not separate the two and neither is named; (5) it closes at least 10% of the held-out "
     "gap that the better of `none` and "
     "`recalibrate_base` leaves (its own part: the shrink reported beside it counts from the base model and includes "
     "what the control closes). If no physical effect passes, `sensor_artifacts` is named if it passes "
-    "(2), (3) and (5) and no physical effect was left unseparated from it by (4). Otherwise `none`, with the "
+    "(2), (3), (3b) and (5) and no physical effect was left unseparated from it by (4). Otherwise `none`, with the "
     "reason of the "
     "best-scoring effect. "
     "Confidence: 1 - (largest corrected p-value the named effect had to pass); for `none`, the smallest such "
@@ -278,8 +282,24 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     out = {"best": best, "m": len(effects), "gap_p": ev["gap_p"], "gap_significant": ev["gap_p"] < alpha,
            "tests": tests}
 
+    def insample_pvalue(e):
+        """(3b): does ``e``'s fit on all the data beat the control's there? Diebold-Mariano on the Huber loss
+        of each sample's in-sample term (the mean over signals of the weighted squared errors, ``ws_full``).
+        None where the control or the in-sample losses are missing."""
+        full = ev.get("ws_full", {})
+        if RECALIBRATE not in cand or e not in full or RECALIBRATE not in full:
+            return None
+        ref = [huber_loss(x) for x in full[RECALIBRATE]]
+        ps = []
+        for m in [x for x in cand if effect_of(x) == effect_of(e) and x in full]:
+            key = f"{m} vs {RECALIBRATE} (in-sample)"
+            if key not in tests:
+                tests[key] = dm_test([huber_loss(x) for x in full[m]], ref)["p"]
+            ps.append(tests[key])
+        return min(ps)
+
     def passes(e):
-        """(passes (2)-(3), the largest p it had to pass, why not)."""
+        """(passes (2)-(3b), the largest p it had to pass, why not)."""
         pn = p_of(e, NONE, effects)
         if pn >= alpha:
             return False, pn, f"{e} does not beat the base model on held-out data (paired test, max-T p = {pn:.2g} ≥ {alpha:.2g})"
@@ -288,9 +308,16 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
             key = f"{e} vs {RECALIBRATE} (Diebold-Mariano)"
             tests[key] = dm_test(robust_of(e), robust_of(RECALIBRATE))["p"]
             pr = max(pr, tests[key])
+        p_in = insample_pvalue(e)
         if pr is not None and pr >= alpha:
             return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ "
                                         f"{alpha:.2g}): a gap that tuning closes")
+        if p_in is not None and p_in >= alpha:
+            return False, max(pn, pr, p_in), (
+                f"{e} predicts the held-out data better than recalibrating the base parameters but does not fit "
+                f"all the data better (in-sample p = {p_in:.2g} ≥ {alpha:.2g}): the control extrapolated worse, "
+                "the data do not show a gap that tuning cannot close")
+        pr = max(pr, p_in) if pr is not None and p_in is not None else pr
         return True, max(pn, pr if pr is not None else 0.0), ""
 
     if not effects:
@@ -356,16 +383,17 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, p_min), "p_used": p_min}
 
 
-def analysis_flags(data, fits, fits_applicable, chosen, restricted) -> list[str]:
-    """What limits the analysis (stated in the verdict line and report.json)."""
+def analysis_flags(n_tests: int, fitted, chosen: str, chosen_converged: bool, restricted: bool) -> list[str]:
+    """What limits the analysis (stated in the verdict line and report.json): ``fitted`` names the candidates
+    that were fitted, ``chosen`` the one the verdict rests on."""
     flags = []
-    if len(data) == 1:
+    if n_tests == 1:
         flags.append("single test: held out = the later half of the same test")
-    missing = [c for c in (RECALIBRATE, SENSOR) if c not in fits]
+    missing = [c for c in (RECALIBRATE, SENSOR) if c not in fitted]
     if missing:
         flags.append("controls not fitted: " + ", ".join(missing) + (" (dropped by the candidate list)" if restricted
                                                                      else " (not applicable)"))
-    if not fits[chosen].converged:
+    if not chosen_converged:
         flags.append(f"fit of {chosen} not converged")
     return flags
 
@@ -597,8 +625,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     ins = ev["candidates"][chosen_name]["insample_shrink"]
     shrink_ci = shrink_interval(data, held_base, sq_after, shrink, seed=seed)
     ins_ci = shrink_interval(data, sq_base, ev["_sq_full"][chosen_name], ins, seed=seed + 1)
-    flags = analysis_flags(data, fits, fits_applicable=[c.name for c in cands], chosen=chosen_name,
-                           restricted=bool(candidates))
+    flags = analysis_flags(len(data), fits, chosen_name, chosen.converged, restricted=bool(candidates))
     confidence = rule["confidence"] * flag_penalty(flags)
     line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags, rule.get("own_shrink"),
                         rule.get("gap_reference", NONE))
