@@ -56,7 +56,7 @@ from .stats import (
 )
 
 COMPLEXITY = 0.02
-MIN_SHRINK = 0.10
+MIN_SHRINK = 0.15  # condition (5): the effect's own part of the held-out gap the better of `none` and the control leaves
 SENSOR = "sensor_artifacts"
 N_BOOT = 300
 GAP_LEFT_BY = {NONE: "left by the base model", RECALIBRATE: "that recalibrating the base leaves"}
@@ -86,7 +86,7 @@ RULE_TEXT = (
     "is not evidence of an effect; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
     "itself passes (2)-(3b) and predicts the held-out data at least as well (held-out score); if it predicts them "
-    "worse, the data do not separate the two and neither is named; (5) it closes at least 10% of the held-out "
+    "worse, the data do not separate the two and neither is named; (5) it closes at least 15% of the held-out "
     "gap that the better of `none` and "
     "`recalibrate_base` leaves (its own part: the shrink reported beside it counts from the base model and includes "
     "what the control closes). If no physical effect passes, `sensor_artifacts` is named if it passes "
