@@ -217,7 +217,7 @@ def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True,
     """Re-apply the verdict rule to every cached case of a benchmark (no fitting): the new summary; with
     ``write``, ``benchmark.{json,md}`` and the figures are rewritten from it. ``exclude``: candidates left
     out of the cached evidence (:func:`.core.without`)."""
-    from .core import ALPHA, analysis_flags, decide, flag_penalty, load_evidence, without
+    from .core import ALPHA, analysis_flags, decide, flag_penalty, load_evidence, rested_on, without
 
     out = Path(out_dir)
     answers = {a["case"]: a for a in json.loads((out / "answers.json").read_text())}
@@ -226,12 +226,11 @@ def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True,
         row = json.loads(row_file.read_text())
         ev = without(load_evidence(row_file.parent), exclude)
         v = decide(ev, alpha=ALPHA if alpha is None else alpha, **rule)
-        c = ev["candidates"]
-        chosen = v.get("member", v["effect"]) if v["effect"] != NONE else v["best"]
+        chosen = rested_on(v)
         # the same flags and confidence penalty as the run's (the candidate list, if any, was the run's)
-        flags = analysis_flags(ev["n_tests"], c, chosen, c[chosen]["converged"], restricted=False)
-        row.update({"verdict": v["effect"], "confidence": v["confidence"] * flag_penalty(flags), "reason": v["reason"],
-                    "shrink": c[v.get("member", v["effect"])]["heldout_shrink"] if v["effect"] != NONE else 0.0,
+        confidence = v["confidence"] * flag_penalty(analysis_flags(ev, chosen, restricted=False))
+        row.update({"verdict": v["effect"], "confidence": confidence, "reason": v["reason"],
+                    "shrink": ev["candidates"][chosen]["heldout_shrink"] if v["effect"] != NONE else 0.0,
                     "own_shrink": v.get("own_shrink"), "visibility": answers[row["case"]].get("max_visibility")})
         rows.append(row)
     if write:

@@ -308,17 +308,16 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
             key = f"{e} vs {RECALIBRATE} (Diebold-Mariano)"
             tests[key] = dm_test(robust_of(e), robust_of(RECALIBRATE))["p"]
             pr = max(pr, tests[key])
-        p_in = insample_pvalue(e)
         if pr is not None and pr >= alpha:
             return False, max(pn, pr), (f"{e} does not beat recalibrating the base parameters (p = {pr:.2g} ≥ "
                                         f"{alpha:.2g}): a gap that tuning closes")
+        p_in = insample_pvalue(e)  # None exactly where pr is (no control), or where no in-sample losses were kept
         if p_in is not None and p_in >= alpha:
             return False, max(pn, pr, p_in), (
                 f"{e} predicts the held-out data better than recalibrating the base parameters but does not fit "
                 f"all the data better (in-sample p = {p_in:.2g} ≥ {alpha:.2g}): the control extrapolated worse, "
                 "the data do not show a gap that tuning cannot close")
-        pr = max(pr, p_in) if pr is not None and p_in is not None else pr
-        return True, max(pn, pr if pr is not None else 0.0), ""
+        return True, max(pn, pr or 0.0, p_in or 0.0), ""
 
     if not effects:
         return {**out, "effect": NONE, "reason": "no applicable effect", "confidence": 1.0, "p_used": None}
@@ -383,17 +382,23 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
     return {**out, "effect": NONE, "reason": why, "confidence": min(1.0, p_min), "p_used": p_min}
 
 
-def analysis_flags(n_tests: int, fitted, chosen: str, chosen_converged: bool, restricted: bool) -> list[str]:
-    """What limits the analysis (stated in the verdict line and report.json): ``fitted`` names the candidates
-    that were fitted, ``chosen`` the one the verdict rests on."""
+def rested_on(rule: dict) -> str:
+    """The candidate fit a verdict from :func:`decide` rests on: the named effect's member, or for ``none`` the
+    best-scoring candidate."""
+    return rule.get("member", rule["effect"]) if rule["effect"] != NONE else rule["best"]
+
+
+def analysis_flags(ev: dict, chosen: str, restricted: bool) -> list[str]:
+    """What limits the analysis (stated in the verdict line and report.json), from the evidence
+    (:func:`evidence` or :func:`load_evidence`) and the fit ``chosen`` that the verdict rests on."""
     flags = []
-    if n_tests == 1:
+    if ev["n_tests"] == 1:
         flags.append("single test: held out = the later half of the same test")
-    missing = [c for c in (RECALIBRATE, SENSOR) if c not in fitted]
+    missing = [c for c in (RECALIBRATE, SENSOR) if c not in ev["candidates"]]
     if missing:
         flags.append("controls not fitted: " + ", ".join(missing) + (" (dropped by the candidate list)" if restricted
                                                                      else " (not applicable)"))
-    if not chosen_converged:
+    if not ev["candidates"][chosen]["converged"]:
         flags.append(f"fit of {chosen} not converged")
     return flags
 
@@ -615,7 +620,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
             "simulations": f.n_simulations, "fit_time_s": t_fit[n], "notes": f.notes,
         })
     ranking.sort(key=lambda r: r["score"])
-    chosen_name = rule.get("member", effect) if effect != NONE else best
+    chosen_name = rested_on(rule)
     chosen = fits[chosen_name]
     sq_after = ev["_sq_held"][chosen_name]
     held_base = ev["_sq_base_held"]
@@ -625,7 +630,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     ins = ev["candidates"][chosen_name]["insample_shrink"]
     shrink_ci = shrink_interval(data, held_base, sq_after, shrink, seed=seed)
     ins_ci = shrink_interval(data, sq_base, ev["_sq_full"][chosen_name], ins, seed=seed + 1)
-    flags = analysis_flags(len(data), fits, chosen_name, chosen.converged, restricted=bool(candidates))
+    flags = analysis_flags(ev, chosen_name, restricted=bool(candidates))
     confidence = rule["confidence"] * flag_penalty(flags)
     line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags, rule.get("own_shrink"),
                         rule.get("gap_reference", NONE))
