@@ -848,3 +848,17 @@ def test_an_effects_two_fits_share_one_polish_simulation(tmp_path):
                 assert on == pytest.approx(below[f][branch])
             assert ff.polish["used_gradient"] and ff.polish["iterations"] == 1
             assert np.isfinite(ff.polish["start_loss"]) and ff.polish["end_loss"] <= ff.polish["start_loss"]
+    # the rounding check re-simulates each fit on the values it stands on (the base's for `@base`), not on the
+    # control's full fit
+    from types import SimpleNamespace
+
+    from trackenv.diagnose.candidates import ON
+    from trackenv.diagnose.sensitivity import _values
+
+    control = SimpleNamespace(candidate=recal, full=SimpleNamespace(params=below[-1][0]))
+    for fit in (on_control, on_base):
+        _, vals, _ = _values(fit, {"recalibrate_base": control})
+        assert {k: float(vals[ON + k][0]) for k in fitted} == pytest.approx(
+            {k: fit.full.params[f"recalibrate_base.{k}"] for k in fitted})
+    assert {k: float(_values(on_base, {"recalibrate_base": control})[1][ON + k][0]) for k in fitted} == \
+        pytest.approx({k: recal.anchor[k] for k in fitted})

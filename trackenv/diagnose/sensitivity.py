@@ -37,9 +37,10 @@ def _values(fit: CandidateFit, fits: dict) -> tuple:
         cand = fits[RECALIBRATE].candidate
         return cand, {k: np.array([v], np.float64) for k, v in cand.anchor.items()}, ()
     vals = cand.physical(fit.full.unit[None])  # {name: (1,)}: one point of the unit cube
-    if cand.on is not None:
-        on = fits[cand.on.name].full.params
-        vals |= {ON + s.name: np.array([on[s.name]], np.float64) for s in cand.on.specs}
+    if cand.on is not None:  # the values this fit stands on, as it recorded them: the control's full fit, one
+        # of its fold fits (where that fitted all the data better, :mod:`.fit`) or the base (``@base``)
+        vals |= {ON + s.name: np.array([fit.full.params[f"{cand.on.name}.{s.name}"]], np.float64)
+                 for s in cand.on.specs}
     window = fit.full.params.get("encoder_window")
     return cand, vals, (() if window is None else (float(window),))
 
