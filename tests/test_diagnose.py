@@ -603,7 +603,8 @@ def test_rounding_check_runs_on_a_family_with_its_own_state(tmp_path):
     unit = pitch.anchor_unit(control)
     unit[0] = 0.5  # height factor 1.5: a load transfer the lag acts on
     fits = {"recalibrate_base": SimpleNamespace(candidate=recal, full=SimpleNamespace(params=control)),
-            "pitch_load_transfer": SimpleNamespace(candidate=pitch, full=SimpleNamespace(unit=unit, params={}))}
+            "pitch_load_transfer": SimpleNamespace(candidate=pitch, full=SimpleNamespace(  # a fit records what it stands on
+                unit=unit, params={f"recalibrate_base.{k}": v for k, v in control.items()}))}
     check = rounding_check(sim, tests, "pitch_load_transfer", fits)
     assert "note" not in check and 0.0 <= check["moved_fraction"] <= 1.0 and np.isfinite(check["max_sigma"]), check
     values = {k: np.array([[float(v[0])]]) for k, v in pitch.physical(unit[None]).items()}
