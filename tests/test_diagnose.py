@@ -690,13 +690,16 @@ def test_the_fit_on_all_the_data_is_the_best_point_any_fold_found_for_them(tmp_p
                             * fold_defs[-1].weights))
     scores = [5.0] * (F - 1) + [loss_off]  # calibration losses of the folds: not what the full fit compares
     info = [{} for _ in range(F)]
-    _best_point_for_all_data(tests, fold_defs, units, chosen, wins, preds, scores, info)
+    parts = [_losses(tests, [{s: x[:, None] for s, x in q.items()} for q in p])[:, :, 0] for p in preds]
+    _best_point_for_all_data(fold_defs, parts, units, chosen, wins, preds, scores, info)
     assert info[-1] == {"from_fold": 0, "own_loss": loss_off}
     assert units[-1] is units[0] and wins[-1] == wins[0] and chosen[-1] == {"k": 0.0} and preds[-1] is exact
+    assert parts[-1] is parts[0]  # the loss parts follow the point
     assert scores[-1] == 0.0 < loss_off  # its loss on all the data, not the fold's calibration loss (0 too)
     # a full fit that is the best already is kept, with nothing recorded
     units2, preds2, scores2, info2 = [np.zeros(2)] * F, [off] * F, [0.0] * (F - 1) + [0.9 * loss_off], [{}] * F
-    _best_point_for_all_data(tests, fold_defs, units2, None, [None] * F, preds2, scores2, info2)
+    parts2 = [_losses(tests, [{s: x[:, None] for s, x in q.items()} for q in off])[:, :, 0]] * F
+    _best_point_for_all_data(fold_defs, parts2, units2, None, [None] * F, preds2, scores2, info2)
     assert scores2[-1] == 0.9 * loss_off and info2[-1] == {}
     # the search's pool offers the full fit every point, a fold only the shared ones and its own
     pool = _Pool()

@@ -410,31 +410,27 @@ def _polish_branches(sim, cand, fold_defs, picks: list[_Pick], polish_iters, jac
              "n_simulations": res["n_simulations"] // k} for b in range(k)]
 
 
-def _best_point_for_all_data(tests, fold_defs, units, chosen, wins, preds, scores, polish_info) -> None:
+def _best_point_for_all_data(fold_defs, parts, units, chosen, wins, preds, scores, polish_info) -> None:
     """Make the full fit (the last fold) the best point for all the data among its own and every fold's final
     point (in place). Each fold's point was simulated on every test, so its loss on all the data is known
     without a new simulation. Where the loss is rough in the parameters (stick-slip after a stop on hard
     ground), the full fit's own search and polish can stop far above a point that a fold fit reached:
     on a blind null case on asphalt the control's full fit ended at 1.77 while one of its fold points
     fits all the data at 0.68 (the nuisance's own values: 0.74). ``polish_info[-1]["from_fold"]`` records
-    a replacement."""
+    a replacement. ``parts``: per fit, its (n_tests, 2) loss parts (:func:`test_loss_parts`), swapped too."""
     F = len(fold_defs)
     w = fold_defs[-1].weights
-    n = len(tests)
     best = F - 1
     best_loss = scores[-1] if np.isfinite(scores[-1]) else np.inf
     for f in range(F - 1):
-        if preds[f] is None:
-            continue
-        lp = np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
-                       for j in range(n)])
-        loss = float(np.sum(np.where(w > 0, lp * w, 0.0)))
+        loss = float(np.sum(np.where(w > 0, parts[f] * w, 0.0)))
         if np.isfinite(loss) and loss < best_loss:
             best, best_loss = f, loss
     if best == F - 1:
         return
     polish_info[-1] = dict(polish_info[-1], from_fold=best, own_loss=float(scores[-1]))
     units[-1], wins[-1], preds[-1], scores[-1] = units[best], wins[best], preds[best], best_loss
+    parts[-1] = parts[best]
     if chosen is not None:
         chosen[-1] = chosen[best]
 
@@ -461,7 +457,9 @@ def _finish(cand, tests, fold_defs, pick: _Pick, res: dict | None, below_keys, r
         notes += res["notes"]
     fits, heldout_pred, heldout_loss = [], [None] * n, np.full(n, np.inf)
     masks = [t.fit_mask.copy() for t in tests]
-    _best_point_for_all_data(tests, fold_defs, units, chosen, wins, preds, scores, polish_info)
+    parts = [np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
+                       for j in range(n)]) for f in range(F)]  # per fit: (n, 2)
+    _best_point_for_all_data(fold_defs, parts, units, chosen, wins, preds, scores, polish_info)
     full_fit = full_pred = full_loss = None
     for f, fd in enumerate(fold_defs):
         info = polish_info[f]
@@ -476,8 +474,7 @@ def _finish(cand, tests, fold_defs, pick: _Pick, res: dict | None, below_keys, r
             params["encoder_window"] = float(wins[f])
         if chosen is not None:
             params.update({f"{cand.on.name}.{k}": float(chosen[f][k]) for k in below_keys})
-        lp = np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
-                       for j in range(n)])  # (n, 2)
+        lp = parts[f]
         held = () if fd.kind == "full" else (fd.held,)
         ff = FoldFit(fd.calibration, held, unit, params, float(scores[f]), conv, fd.kind, search_score[f], info)
         if fd.kind == "full":
