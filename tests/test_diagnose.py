@@ -673,7 +673,7 @@ def test_the_fit_on_all_the_data_is_the_best_point_any_fold_found_for_them(tmp_p
     full fit's own search and polish found. The full fit then takes that point, its encoder window and the
     values it stands on, records where it came from, and its loss is the point's loss on all the data; a full
     fit that is already the best keeps its own point."""
-    from trackenv.diagnose.fit import _best_point_for_all_data, _losses, _Pool, full_fold
+    from trackenv.diagnose.fit import _best_point_for_all_data, _Pool, full_fold, point_loss_parts
 
     tests, _ = load_tests(_base_case(tmp_path / "case", seed=6))
     folds = make_folds(tests)
@@ -686,11 +686,10 @@ def test_the_fit_on_all_the_data_is_the_best_point_any_fold_found_for_them(tmp_p
     units = [np.full(2, 0.1 * f) for f in range(F)]
     wins = [0.05 * f for f in range(F)]
     chosen = [{"k": float(f)} for f in range(F)]
-    loss_off = float(np.sum(_losses(tests, [{s: x[:, None] for s, x in p.items()} for p in off])[:, :, 0]
-                            * fold_defs[-1].weights))
+    loss_off = float(np.sum(point_loss_parts(tests, off) * fold_defs[-1].weights))
     scores = [5.0] * (F - 1) + [loss_off]  # calibration losses of the folds: not what the full fit compares
     info = [{} for _ in range(F)]
-    parts = [_losses(tests, [{s: x[:, None] for s, x in q.items()} for q in p])[:, :, 0] for p in preds]
+    parts = [point_loss_parts(tests, p) for p in preds]
     _best_point_for_all_data(fold_defs, parts, units, chosen, wins, preds, scores, info)
     assert info[-1] == {"from_fold": 0, "own_loss": loss_off}
     assert units[-1] is units[0] and wins[-1] == wins[0] and chosen[-1] == {"k": 0.0} and preds[-1] is exact
@@ -698,7 +697,7 @@ def test_the_fit_on_all_the_data_is_the_best_point_any_fold_found_for_them(tmp_p
     assert scores[-1] == 0.0 < loss_off  # its loss on all the data, not the fold's calibration loss (0 too)
     # a full fit that is the best already is kept, with nothing recorded
     units2, preds2, scores2, info2 = [np.zeros(2)] * F, [off] * F, [0.0] * (F - 1) + [0.9 * loss_off], [{}] * F
-    parts2 = [_losses(tests, [{s: x[:, None] for s, x in q.items()} for q in off])[:, :, 0]] * F
+    parts2 = [point_loss_parts(tests, off)] * F
     _best_point_for_all_data(fold_defs, parts2, units2, None, [None] * F, preds2, scores2, info2)
     assert scores2[-1] == 0.9 * loss_off and info2[-1] == {}
     # the search's pool offers the full fit every point, a fold only the shared ones and its own

@@ -233,6 +233,11 @@ def _losses(tests, pred):
     return np.stack([test_loss_parts(tests[j], pred[j]) for j in range(len(tests))])  # (n, 2, C)
 
 
+def point_loss_parts(tests, pred) -> np.ndarray:
+    """(n_tests, 2) loss parts (:func:`test_loss_parts`) of one parameter point; ``pred``: per test {signal: (K,)}."""
+    return _losses(tests, [{s: x[:, None] for s, x in q.items()} for q in pred])[:, :, 0]
+
+
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
                   min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None,
                   jacobian: str = "secant", below: list | None = None,
@@ -457,8 +462,7 @@ def _finish(cand, tests, fold_defs, pick: _Pick, res: dict | None, below_keys, r
         notes += res["notes"]
     fits, heldout_pred, heldout_loss = [], [None] * n, np.full(n, np.inf)
     masks = [t.fit_mask.copy() for t in tests]
-    parts = [np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in preds[f][j].items()})[:, 0]
-                       for j in range(n)]) for f in range(F)]  # per fit: (n, 2)
+    parts = [point_loss_parts(tests, preds[f]) for f in range(F)]  # per fit: (n, 2)
     _best_point_for_all_data(fold_defs, parts, units, chosen, wins, preds, scores, polish_info)
     full_fit = full_pred = full_loss = None
     for f, fd in enumerate(fold_defs):

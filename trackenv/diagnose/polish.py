@@ -213,7 +213,7 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
                  progress=None, jacobian: str = "secant", below: list | None = None) -> dict:
     """Levenberg-Marquardt from each fold's search point; see the module docstring. ``below``: per fold, the
     fitted values of the candidate that ``cand`` stands on (:attr:`.candidates.Candidate.on`)."""
-    from .fit import test_loss_parts
+    from .fit import point_loss_parts
 
     F, p = len(fold_defs), cand.n_params
     tests = sim.tests
@@ -282,8 +282,7 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
         per_test = []
         for j, t in enumerate(tests):
             per_test.append({s: np.asarray(pr[(j, s)][f], np.float64) for s in t.measured})
-        lp = np.stack([test_loss_parts(tests[j], {k: v[:, None] for k, v in per_test[j].items()})[:, 0]
-                       for j in range(len(tests))])
+        lp = point_loss_parts(tests, per_test)
         sc = float(np.sum(np.where(fold_defs[f].weights > 0, lp * fold_defs[f].weights, 0.0)))
         units_new.append(u)
         preds_new.append(per_test)
