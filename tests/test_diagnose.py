@@ -537,11 +537,41 @@ def _base_case(folder, seed=0):
     return folder
 
 
-def test_base_model_plus_noise_gives_none(tmp_path):
+class _Bar:
+    """A stand-in for tqdm that records what a progress bar is told."""
+
+    bars: list = []
+
+    def __init__(self, total=None, disable=False, **kw):
+        self.total, self.disable, self.n, self.postfix, self.updates, self.closed_at = total, disable, 0, "", [], None
+        _Bar.bars.append(self)
+
+    def update(self, k=1):
+        self.n += k
+        self.updates.append((self.postfix, k))
+
+    def set_postfix_str(self, s):
+        self.postfix = s
+
+    def close(self):
+        self.closed_at = self.n
+
+
+def test_base_model_plus_noise_gives_none(tmp_path, monkeypatch):
+    import tqdm.auto
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", _Bar)
+    _Bar.bars.clear()
     d = diagnose(_base_case(tmp_path / "case"), None,
                  candidates=["internal_resistance", "slip_sinkage", "recalibrate_base", "sensor_artifacts"],
-                 progress=False, rounds=1, polish_iters=2)
+                 progress=True, rounds=1, polish_iters=2)
     assert d.verdict["effect"] == "none", d.verdict
+    # the progress bar ends full (the candidates' fit plans), and it moves while the polish runs: after the
+    # search's two updates (its design and its one round, one bucket) each fitted candidate reports its polish
+    (bar,) = _Bar.bars
+    assert bar.closed_at == bar.total > 0, (bar.closed_at, bar.total)
+    for name in ("recalibrate_base", "internal_resistance", "slip_sinkage", "sensor_artifacts"):
+        assert len([k for c, k in bar.updates if c == name and k > 0]) >= 3, (name, bar.updates)
     checked = {c["fit"]: c for c in d.report["rounding_check"]}  # the verdict's references, each checked once
     assert {"none", "recalibrate_base"} <= set(checked) and len(checked) == len(d.report["rounding_check"])
     assert all(c["moved_fraction"] is not None for c in checked.values()), checked
@@ -615,7 +645,7 @@ def test_rounding_check_runs_on_a_family_with_its_own_state(tmp_path):
 
 def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):
     """Logs of the base model + noise; the LM polish of ``recalibrate_base`` started off the truth (internal
-    resistance factor 1.3 instead of 1) lowers the calibration loss through jax.jacfwd of the simulator, moves
+    resistance factor 1.3 instead of 1) lowers the calibration loss through the batched simulator (secant Jacobian), moves
     back toward the truth, says how it stopped, and counts its simulations."""
     from trackenv.diagnose.batch import BatchSimulator
     from trackenv.diagnose.fit import full_fold
@@ -636,11 +666,14 @@ def test_polish_lowers_the_loss_and_reports_convergence(tmp_path):
     assert info["stop"] in ("small step", "small gradient", "small improvement", "iteration limit")
     assert "internal_resistance_factor" not in info["held_still"]  # the go-stops feel it
     before = sim.n_vehicle_seconds
-    res2 = polish_folds(sim, cand, [fd], [start], [None], [np.inf], iters=4)
-    # its simulations count in the report's vehicle-seconds (both tests are 5 s long: one bucket)
+    calls = []
+    res2 = polish_folds(sim, cand, [fd], [start], [None], [np.inf], iters=4, progress=calls.append)
+    # its simulations count in the report's vehicle-seconds (both tests are 5 s long: one bucket), and each
+    # batched evaluation reports its own to the progress bar as it ends
     (b,) = sim.buckets
     assert sim.n_vehicle_seconds - before == pytest.approx(res2["n_simulations"] * b.n_steps * b.dt)
     i2 = res2["info"][0]
+    assert sum(calls) == res2["n_simulations"] and len(calls) == 1 + i2["iterations"], (calls, i2)
     assert i2["end_loss"] < 0.8 * i2["start_loss"], i2  # from the wrong start the polish closes most of the way
     assert abs(res2["units"][0][0] - cand.anchor_unit()[0]) < abs(start[0] - cand.anchor_unit()[0])
 

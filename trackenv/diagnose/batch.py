@@ -187,6 +187,8 @@ class BatchSimulator:
                 ch = self._instrument_only(bi, b, cand, values, S)
                 for q, j in enumerate(b.tests):
                     pred[j] = self._at_log(j, {k: v[:, q * S:(q + 1) * S] for k, v in ch.items()})
+                if progress:
+                    progress(nb * S)
                 continue
             params = self._params(b, cand, values, S)
             ch, div = self._simulate(b, params, nb * S)

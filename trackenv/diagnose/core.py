@@ -27,7 +27,7 @@ from ..compare import json_clean as _clean
 from .batch import FIT_SUBSTEP, BatchSimulator
 from .candidates import NONE, ON_BASE, RECALIBRATE, candidate_set, effect_of
 from .data import DiagnosisError, TestData, load_tests
-from .fit import CandidateFit, fit_candidate, make_folds
+from .fit import CandidateFit, fit_candidate, fit_plan, make_folds
 from .metrics import (
     cell_ci,
     cell_table,
@@ -550,18 +550,22 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         else:
             cands.append(c)
     folds = make_folds(data)
-    # progress: vehicle-simulations done out of the planned total
+    # progress: simulations of a test done out of the planned total (each candidate's :func:`.fit.fit_plan`)
     from tqdm.auto import tqdm
 
-    planned = 0
-    for c in cands:
-        if c.n_params == 0:
-            planned += len(data)
-        else:
-            F = len(folds) + 1
-            m = max(3, int(np.ceil(search_points / F)))
-            k = 2 if (c.is_effect and c.name != SENSOR and any(x.name == RECALIBRATE for x in cands)) else 1
-            planned += k * (len(data) * F * m * (1 + rounds) + len(data) * F * (1 + c.n_params) * (1 + polish_iters))
+    on_control = RECALIBRATE in {c.name for c in cands}
+
+    def branches_of(c) -> tuple[int, ...]:
+        """The fits of ``c`` refined on top of the control's (0) and on the base model (1); () if it stands on nothing.
+        The instruments-only candidate competes only as fitted on the control: its base branch is sampled by the
+        shared design but not refined."""
+        if not (c.is_effect and on_control):
+            return ()
+        return (0,) if c.name == SENSOR else (0, 1)
+
+    planned = sum(fit_plan(c, len(data), len(folds) + 1, min_round=search_points, rounds=rounds,
+                           polish_iters=polish_iters, jacobian=jacobian, n_branch=2 if branches_of(c) else 1,
+                           refined=len(branches_of(c)) or 1) for c in cands)
     bar = tqdm(total=planned, desc="diagnose", unit="sim", disable=not progress, leave=False)
     fits: dict[str, CandidateFit] = {}
     # none, then the control, then every effect twice from one shared search: on top of the control's fit
@@ -571,16 +575,13 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     for c in order:
         bar.set_postfix_str(c.name)
         t0 = time.perf_counter()
-        if c.is_effect and RECALIBRATE in fits:
+        if branches_of(c):
             rc = fits[RECALIBRATE]
             c = c.standing_on(rc.candidate)
             below = [[dict(fd.params), dict(rc.candidate.anchor)] for fd in [*rc.folds, rc.full]]
-            # the instruments-only candidate competes only as fitted on the control: its base branch is
-            # sampled by the shared design but not refined
-            branches = (0,) if c.name == SENSOR else (0, 1)
             branch_fits = fit_candidate(sim, c, folds, seed=seed, rounds=rounds, min_round=search_points,
                                         polish_iters=polish_iters, jacobian=jacobian, progress=bar.update,
-                                        below=below, each_branch=branches)
+                                        below=below, each_branch=branches_of(c))
             fits[c.name] = branch_fits[0]
             t_fit[c.name] = time.perf_counter() - t0  # one search for both fits
             if len(branch_fits) > 1:

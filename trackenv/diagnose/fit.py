@@ -238,6 +238,29 @@ def point_loss_parts(tests, pred) -> np.ndarray:
     return _losses(tests, [{s: x[:, None] for s, x in q.items()} for q in pred])[:, :, 0]
 
 
+def search_size(n_fits: int, per_fold: int = 3, min_round: int = 16) -> int:
+    """Points per fit and branch in each round of the search: at least ``per_fold``, and ``min_round`` over all
+    ``n_fits`` fits (the folds and the full fit)."""
+    return max(per_fold, math.ceil(min_round / n_fits))
+
+
+def fit_plan(cand: Candidate, n_tests: int, n_fits: int, *, per_fold: int = 3, min_round: int = 16, rounds: int = 3,
+             polish_iters: int = 4, jacobian: str = "secant", n_branch: int = 1, refined: int = 1) -> int:
+    """The test evaluations (one parameter set simulated, or for an instruments-only candidate transformed, on
+    one test) that :func:`fit_candidate` plans for ``cand`` on ``n_tests`` tests and ``n_fits`` fits (the folds
+    and the full fit), with ``n_branch`` parameter sets to stand on (``below``) of which ``refined`` are searched
+    and polished (``each_branch``). Every polish iteration is counted; a polish that stops early reports the
+    iterations it skipped when it ends, so that a progress bar over this plan ends full."""
+    p = cand.n_params
+    if p == 0:
+        return n_tests
+    m = search_size(n_fits, per_fold, min_round)
+    search = n_fits * m * n_branch + rounds * n_fits * refined * m
+    per_point = 1 + (2 if jacobian == "secant" else 1) * p
+    polish = (1 + polish_iters) * n_fits * refined * per_point if polish_iters > 0 else 0
+    return n_tests * (search + polish)
+
+
 def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: int = 0, per_fold: int = 3,
                   min_round: int = 16, rounds: int = 3, polish_iters: int = 4, progress=None,
                   jacobian: str = "secant", below: list | None = None,
@@ -279,6 +302,15 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
         branches = list(each_branch)
     else:
         branches = list(range(n_branch)) if (each_branch and below is not None) else [None]
+    plan = fit_plan(cand, n, F, per_fold=per_fold, min_round=min_round, rounds=rounds, polish_iters=polish_iters,
+                    jacobian=jacobian, n_branch=n_branch, refined=len(branches))
+    done = 0
+
+    def tick(k: int) -> None:
+        nonlocal done
+        done += k
+        if progress:
+            progress(k)
 
     def keep_branch(b):
         return None if b is None else (lambda o: branch_of(o) == b)
@@ -303,13 +335,13 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     if p == 0:
         if below is not None:
             raise ValueError(f"{cand.name}: a candidate without parameters cannot stand on another one")
-        pred, div = sim.run(cand, {}, progress)
+        pred, div = sim.run(cand, {}, tick)
         pool.add(np.zeros((1, 0)), _losses(tests, pred), pred, [-1])
         n_sims += n
         n_div += int(div.sum())
         rounds = 0
     else:
-        m = max(per_fold, math.ceil(min_round / F))
+        m = search_size(F, per_fold, min_round)
         S = F * m
         # one global design, every point scored for every fold (on the shared base)
         sob = qmc.LatinHypercube(d=p, seed=seed).random(S)
@@ -322,7 +354,7 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
             for o in range(FB):
                 extra[o] = cand.anchor_unit(below_of(o))
             sob = np.concatenate([sob, extra])
-        pred, div = sim.run(cand, values(sob, owner0), progress, windows)
+        pred, div = sim.run(cand, values(sob, owner0), tick, windows)
         loss = _losses(tests, pred)
         loss[np.broadcast_to(div[:, None, :], loss.shape)] = np.inf
         pool.add(sob, loss, pred, owner0)
@@ -347,7 +379,7 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
                         o = f + F * (n_branch - 1)
                     owner += [o] * m
             pts = np.concatenate(pts)
-            pred, div = sim.run(cand, values(pts, owner), progress, windows)
+            pred, div = sim.run(cand, values(pts, owner), tick, windows)
             loss = _losses(tests, pred)
             loss[np.broadcast_to(div[:, None, :], loss.shape)] = np.inf
             pool.add(pts, loss, pred, owner)
@@ -362,7 +394,9 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
                     k += 1
     picks = [_search_best(cand, fold_defs, pool, F, keep_branch(b), below_of if below is not None else None)
              for b in branches]
-    polished = _polish_branches(sim, cand, fold_defs, picks, polish_iters, jacobian, progress)
+    polished = _polish_branches(sim, cand, fold_defs, picks, polish_iters, jacobian, tick)
+    if done < plan:  # a polish that stopped early: the iterations it skipped
+        tick(plan - done)
     out = [_finish(cand, tests, fold_defs, pick, pol, below_keys, rounds, last_gain[b or 0], n_sims, n_div)
            for b, pick, pol in zip(branches, picks, polished)]
     return out if each_branch and below is not None else out[0]

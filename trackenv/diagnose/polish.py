@@ -212,7 +212,9 @@ def not_polished_note(info: list[dict]) -> list[str]:
 def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, iters: int = 4,
                  progress=None, jacobian: str = "secant", below: list | None = None) -> dict:
     """Levenberg-Marquardt from each fold's search point; see the module docstring. ``below``: per fold, the
-    fitted values of the candidate that ``cand`` stands on (:attr:`.candidates.Candidate.on`)."""
+    fitted values of the candidate that ``cand`` stands on (:attr:`.candidates.Candidate.on`). ``progress``:
+    called after each batched evaluation with its number of test evaluations (one parameter point on one test),
+    the ``n_simulations`` it adds."""
     from .fit import point_loss_parts
 
     F, p = len(fold_defs), cand.n_params
@@ -222,8 +224,11 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
     z = np.log(u0) - np.log1p(-u0)
     if jacobian not in JACOBIANS:
         raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
+    per_call = sum(len(b.tests) for b in sim.buckets) * F * (1 + (2 if jacobian == "secant" else 1) * p)
     r, J, pred = prob(z, jacobian)
     n_calls = 1
+    if progress:
+        progress(per_call)
     loss = np.sum(r**2, axis=1)
     lam = np.full(F, 1e-2)
     active = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(loss)
@@ -257,6 +262,8 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
         z_new = fold_z + step
         r2, J2, pred2 = prob(z_new, jacobian)
         n_calls += 1
+        if progress:
+            progress(per_call)
         loss2 = np.sum(r2**2, axis=1)
         for f in np.flatnonzero(active):
             info[f]["iterations"] = it + 1
@@ -290,8 +297,5 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
         improved.append(bool(info[f]["used_gradient"] and np.isfinite(sc) and sc < scores[f]))
         info[f]["polished_loss"] = sc
         info[f]["search_loss"] = float(scores[f])
-    if progress:
-        progress(0)
-    n_veh = sum(len(b.tests) for b in sim.buckets) * F
     return {"units": units_new, "preds": preds_new, "scores": scores_new, "improved": improved, "info": info,
-            "notes": not_polished_note(info), "n_simulations": n_calls * n_veh * ((1 + 2 * p) if jacobian == "secant" else (1 + p))}
+            "notes": not_polished_note(info), "n_simulations": n_calls * per_call}
