@@ -1,7 +1,7 @@
 """The bad-input table: every kind of input a user touches, one parametrised test.
 
 Each row is one bad (or borderline) input: a log folder, a config, an env action or option, a CLI option,
-a policy zip or a diagnosis folder. A row either expects a clear error (its type, the exit code 2 for a
+a policy zip, a diagnosis folder or a diagnosis option. A row either expects a clear error (its type, the exit code 2 for a
 CLI row, and the file / column / row / key the message must name) or a documented behaviour (a
 conversion, a warning), which the row asserts. No row may produce a traceback from deep inside a
 library, a message with ``np.float64(...)``, or a changed input file. README "Reliability" lists the
@@ -451,6 +451,45 @@ case("diagnose --out into another log collection", "diagnosis folder",
 case("diagnose --vehicle unknown id", "diagnosis folder",
      lambda t: cli("diagnose", log_folder(t / "tests", "x").parent, "--out", t / "d", "--vehicle", "tank"),
      expect_error(Exception, "tank", rc=2))
+# --- diagnosis options: refused before any log is read, any folder made or any fit started ----------------------
+def no_output(check):
+    """``check``, and nothing was written to the ``--out`` folder ``d``."""
+    def both(o: Outcome, tmp: Path):
+        check(o, tmp)
+        assert not (tmp / "d").exists(), "the output folder was made before the option was refused"
+    return both
+
+
+case("diagnose --alpha 2", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--alpha", 2),
+     no_output(expect_error(Exception, "alpha", "strictly between 0 and 1", "2.0", rc=2)))
+case("diagnose --alpha 0 (nothing could ever be significant)", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--alpha", 0),
+     no_output(expect_error(Exception, "alpha", "strictly between 0 and 1", rc=2)))
+case("diagnose --polish-iters -1", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--polish-iters", -1),
+     no_output(expect_error(Exception, "polish_iters", ">= 0", "-1", rc=2)))
+case("diagnose --seed -3", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--seed", -3),
+     no_output(expect_error(Exception, "seed", ">= 0", "-3", rc=2)))
+case("diagnose(rounds=-1)", "diagnosis option",
+     lambda t: call(lambda: __import__("trackenv.diagnose", fromlist=["diagnose"]).diagnose(TWIN, None, rounds=-1, progress=False)),
+     expect_error(ValueError, "rounds", "-1"))
+case("diagnose(search_points=0)", "diagnosis option",
+     lambda t: call(lambda: __import__("trackenv.diagnose", fromlist=["diagnose"]).diagnose(TWIN, None, search_points=0, progress=False)),
+     expect_error(ValueError, "search_points", ">= 1"))
+case("diagnose-benchmark --cases 0", "diagnosis option",
+     lambda t: cli("diagnose-benchmark", "--out", t / "d", "--cases", 0),
+     no_output(expect_error(Exception, "n_cases", ">= 1", rc=2)))
+case("diagnose-benchmark --near-limit-fraction 2", "diagnosis option",
+     lambda t: cli("diagnose-benchmark", "--out", t / "d", "--near-limit-fraction", 2),
+     no_output(expect_error(Exception, "near_limit_fraction", "[0, 1]", rc=2)))
+case("diagnose-benchmark --tests-per-case 9", "diagnosis option",
+     lambda t: cli("diagnose-benchmark", "--out", t / "d", "--tests-per-case", 9),
+     no_output(expect_error(Exception, "n_tests", "from 1 to 6", "9", rc=2)))
+case("diagnose-benchmark --rescore --alpha 1.5", "diagnosis option",
+     lambda t: cli("diagnose-benchmark", "--out", t / "d", "--rescore", "--alpha", 1.5),
+     expect_error(Exception, "alpha", "1.5", rc=2))
 case("import borealtc from a missing folder", "CLI option",
      lambda t: cli("import", "borealtc", t / "nope", "--out", t / "o"),
      expect_error(Exception, "nope", rc=2))
@@ -468,7 +507,7 @@ def test_bad_input(run, check, tmp_path):
 def test_table_covers_every_input_kind():
     kinds = {p.id.split(":")[0] for p in CASES}
     assert kinds >= {"log folder", "config", "env option", "env action", "CLI option", "policy zip",
-                     "diagnosis folder"}
+                     "diagnosis folder", "diagnosis option"}
 
 
 def test_real_process_exit_code_and_no_traceback(tmp_path):

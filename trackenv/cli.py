@@ -181,8 +181,10 @@ def cmd_evaluate(args) -> int:
 
 def cmd_diagnose(args) -> int:
     from trackenv.diagnose import diagnose
+    from trackenv.diagnose.core import check_options
     from trackenv.outputs import prepare_output_dir
 
+    check_options(seed=args.seed, polish_iters=args.polish_iters, alpha=args.alpha)  # before the output folder is made
     prepare_output_dir(args.out, "diagnose", force=args.force, inputs=(args.folder,))
     only = [x for x in args.tests.split(",") if x] if args.tests else None
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None

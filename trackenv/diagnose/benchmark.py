@@ -26,7 +26,8 @@ import numpy as np
 
 from .blind import NEAR_LIMIT
 from .candidates import NONE
-from .core import diagnose
+from .core import check_options, diagnose, is_integer
+from .data import DiagnosisError
 
 LABELS = ("slip_sinkage", "lateral_friction_radius", "internal_resistance", "grouser_stiction", "pitch_load_transfer",
           "sensor_artifacts", NONE)
@@ -167,6 +168,28 @@ def _row(a: dict, v: dict, rank: dict, wall_s: float) -> dict:
             "maneuvers": [t["maneuver"] for t in a["tests"]], "wall_s": wall_s}
 
 
+def check_benchmark_options(*, n_cases: int, labels: list[str] | None = None, null_fraction: float = 0.2,
+                            n_tests: int | None = None, t_max: float | None = None,
+                            near_limit_fraction: float = 1 / 3) -> None:
+    """Raise :class:`.data.DiagnosisError` naming the option if the blind cases of :func:`run_benchmark` cannot be
+    drawn: ``n_cases`` >= 1 (unless ``labels`` are given), ``null_fraction`` and ``near_limit_fraction`` in
+    [0, 1], ``n_tests`` None or 1 to ``blind.MAX_TESTS``, ``t_max`` None or a positive duration [s]."""
+    from .blind import MAX_TESTS
+
+    def fraction(x) -> bool:
+        return isinstance(x, (int, float, np.floating)) and not isinstance(x, bool) and 0.0 <= x <= 1.0
+
+    if not labels and not (is_integer(n_cases) and n_cases >= 1):
+        raise DiagnosisError(f"n_cases (the number of blind cases) must be an integer >= 1, got {n_cases!r}")
+    for name, value in (("null_fraction", null_fraction), ("near_limit_fraction", near_limit_fraction)):
+        if not fraction(value):
+            raise DiagnosisError(f"{name} must be a fraction in [0, 1], got {value!r}")
+    if n_tests is not None and not (is_integer(n_tests) and 1 <= n_tests <= MAX_TESTS):
+        raise DiagnosisError(f"n_tests (tests per case) must be an integer from 1 to {MAX_TESTS}, got {n_tests!r}")
+    if t_max is not None and not (isinstance(t_max, (int, float, np.floating)) and np.isfinite(t_max) and t_max > 0):
+        raise DiagnosisError(f"t_max (the longest test) must be a positive duration [s], got {t_max!r}")
+
+
 def run_benchmark(out_dir: str | Path, n_cases: int, seed: int = 0, null_fraction: float = 0.2,
                   labels: list[str] | None = None, n_tests: int | None = None, t_max: float | None = None,
                   near_limit_fraction: float = 1 / 3, progress: bool = True, **diagnose_kwargs) -> dict:
@@ -176,6 +199,10 @@ def run_benchmark(out_dir: str | Path, n_cases: int, seed: int = 0, null_fractio
 
     from . import blind
 
+    check_benchmark_options(n_cases=n_cases, labels=labels, null_fraction=null_fraction, n_tests=n_tests,
+                            t_max=t_max, near_limit_fraction=near_limit_fraction)
+    check_options(seed=seed, **{k: v for k, v in diagnose_kwargs.items()
+                                if k in ("rounds", "search_points", "polish_iters", "alpha", "substep", "pad_s")})
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -219,6 +246,8 @@ def rescore(out_dir: str | Path, alpha: float | None = None, write: bool = True,
     out of the cached evidence (:func:`.core.without`)."""
     from .core import ALPHA, analysis_flags, decide, flag_penalty, load_evidence, rested_on, without
 
+    if alpha is not None:
+        check_options(alpha=alpha)
     out = Path(out_dir)
     answers = {a["case"]: a for a in json.loads((out / "answers.json").read_text())}
     rows = []

@@ -497,6 +497,34 @@ def load_evidence(path: Path) -> dict:
     return ev
 
 
+def is_integer(x) -> bool:
+    """True for a Python or numpy integer (not a bool)."""
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+
+def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4,
+                  alpha: float = ALPHA, substep: float = FIT_SUBSTEP, pad_s: float | None = None) -> None:
+    """Raise :class:`.data.DiagnosisError` naming the option if a fit or rule option of :func:`diagnose` cannot
+    work: ``seed`` (an integer >= 0), ``rounds`` and ``polish_iters`` (integers >= 0), ``search_points`` (an
+    integer >= 1), ``alpha`` (strictly between 0 and 1), ``substep`` (:func:`trackenv.simulate.check_substep`),
+    ``pad_s`` (None or a positive duration [s]). Checked before any log is read or any fit starts."""
+    from ..simulate import MAX_SUBSTEP, check_substep
+
+    for name, value, low, what in (("seed", seed, 0, "an integer >= 0"), ("rounds", rounds, 0, "an integer >= 0"),
+                                   ("search_points", search_points, 1, "an integer >= 1"),
+                                   ("polish_iters", polish_iters, 0, "an integer >= 0 (0: no polish)")):
+        if not (is_integer(value) and value >= low):
+            raise DiagnosisError(f"{name} must be {what}, got {value!r}")
+    if not (isinstance(alpha, (int, float, np.floating)) and not isinstance(alpha, bool) and 0.0 < alpha < 1.0):
+        raise DiagnosisError(f"alpha (the rule's significance level) must lie strictly between 0 and 1, got {alpha!r}")
+    try:
+        check_substep(substep, MAX_SUBSTEP)
+    except ValueError as exc:
+        raise DiagnosisError(f"the fits' {exc}") from None
+    if pad_s is not None and not (isinstance(pad_s, (int, float, np.floating)) and np.isfinite(pad_s) and pad_s > 0):
+        raise DiagnosisError(f"pad_s must be a positive duration [s] or None, got {pad_s!r}")
+
+
 def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: list[str] | None = None,
              internal_resistance: str = "constant", candidates: list[str] | None = None, substep: float = FIT_SUBSTEP,
              seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
@@ -526,6 +554,9 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     """
     t_start = time.perf_counter()
     from .polish import JACOBIANS
+
+    check_options(seed=seed, rounds=rounds, search_points=search_points, polish_iters=polish_iters, alpha=alpha,
+                  substep=substep, pad_s=pad_s)
 
     if jacobian not in JACOBIANS:
         raise DiagnosisError(f"jacobian must be one of {', '.join(JACOBIANS)}, got {jacobian!r}")
