@@ -490,6 +490,12 @@ case("diagnose-benchmark --tests-per-case 9", "diagnosis option",
 case("diagnose-benchmark --rescore --alpha 1.5", "diagnosis option",
      lambda t: cli("diagnose-benchmark", "--out", t / "d", "--rescore", "--alpha", 1.5),
      expect_error(Exception, "alpha", "1.5", rc=2))
+case("evaluate --seed -5", "CLI option",
+     lambda t: cli("evaluate", DRIVERS / "GoStop-v0-dry_sand.zip", "--task", "go_stop", "--episodes", 1, "--seed", -5),
+     expect_error(Exception, "seed", ">= 0", "-5", rc=2))
+case("field-twin --seed -1", "CLI option",
+     lambda t: cli("field-twin", "--out", t / "twin", "--seed", -1),
+     expect_error(Exception, "seed", ">= 0", "-1", rc=2))
 case("import borealtc from a missing folder", "CLI option",
      lambda t: cli("import", "borealtc", t / "nope", "--out", t / "o"),
      expect_error(Exception, "nope", rc=2))

@@ -141,6 +141,8 @@ def make_field_twin(out_dir: str | Path = "data/field/thesis", seed: int = 0, sa
 
     if not (sample_rate > 0 and math.isfinite(sample_rate)):
         raise ValueError(f"sample_rate must be a positive number of Hz, got {sample_rate!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed (of the instrument noise) must be an integer >= 0, got {seed!r}")
     known = list_field_tests()
     ids = known if tests is None else list(tests)
     unknown = [t for t in ids if t not in known]

@@ -120,6 +120,8 @@ def evaluate(task: str, terrain: str = "dry_sand", policy: str | Path | Any | No
     sim_t = resolve_terrain(sim_terrain) if sim_terrain else terrain
     if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed (the first episode's) must be an integer >= 0, got {seed!r}")
     methods = tuple(methods)
     bad = [m for m in methods if m not in METHODS]
     if bad:
