@@ -490,6 +490,18 @@ case("diagnose-benchmark --tests-per-case 9", "diagnosis option",
 case("diagnose-benchmark --rescore --alpha 1.5", "diagnosis option",
      lambda t: cli("diagnose-benchmark", "--out", t / "d", "--rescore", "--alpha", 1.5),
      expect_error(Exception, "alpha", "1.5", rc=2))
+def anchors_without_nan(o: Outcome, tmp: Path):
+    """A replay whose output step is longer than the thesis anchors' 1-3 s window: it runs, says so per anchor,
+    and its metrics.json holds no NaN (the anchor's simulated value is null, with the note)."""
+    assert o.rc == 0, o.text
+    assert "replay with a smaller dt" in o.text and "nan" not in o.text.lower(), o.text
+    met = (tmp / "out" / "metrics.json").read_text()
+    assert "NaN" not in met
+    assert all(a["simulated"] is None and "dt = 5 s" in a["note"] for a in json.loads(met)["anchors"])
+
+
+case("replay of a thesis test with --dt 5 (longer than its anchors' window)", "CLI option",
+     lambda t: replay_cli(t, "go_stop_dry_sand", "--dt", 5), anchors_without_nan)
 case("evaluate --seed -5", "CLI option",
      lambda t: cli("evaluate", DRIVERS / "GoStop-v0-dry_sand.zip", "--task", "go_stop", "--episodes", 1, "--seed", -5),
      expect_error(Exception, "seed", ">= 0", "-5", rc=2))

@@ -330,6 +330,12 @@ def anchor_metrics(prof, traj, dt: float) -> list[dict]:
         sim = None
         if a["stat"] == "mean" and a["t0"] is not None and a["t1"] is not None:
             m = (t >= a["t0"] - 1e-9) & (t <= a["t1"] + 1e-9)
+            if not m.any():  # an output step longer than the window: no mean to compare, not a NaN
+                row.update(simulated=None, rel_diff=None,
+                           note=f"no simulated sample in {a['t0']:g}-{a['t1']:g} s at the output step dt = {dt:g} s; "
+                                "replay with a smaller dt")
+                rows.append(row)
+                continue
             if a["signal"] == "current":
                 sim = float(np.mean(0.5 * (np.abs(ch["i_left"][m]) + np.abs(ch["i_right"][m]))))
             elif a["signal"] in ch:
