@@ -277,6 +277,9 @@ def fit_candidate(sim: BatchSimulator, cand: Candidate, folds: list, *, seed: in
     ``each_branch``: instead, search and polish every branch separately (sharing the global design) and
     return one :class:`CandidateFit` per branch, in the order of the sets in ``below``; a tuple of branch
     indices refines and returns only those branches (the global design still spans all of them).
+
+    ``progress``: called with the test evaluations of each batch as it ends, the search's and the polish's; over
+    the whole fit they add up to :func:`fit_plan`'s count.
     """
     tests = sim.tests
     n = len(tests)
