@@ -478,6 +478,9 @@ case("diagnose(rounds=-1)", "diagnosis option",
 case("diagnose(search_points=0)", "diagnosis option",
      lambda t: call(lambda: __import__("trackenv.diagnose", fromlist=["diagnose"]).diagnose(TWIN, None, search_points=0, progress=False)),
      expect_error(ValueError, "search_points", ">= 1"))
+case("diagnose --candidates , (an empty list, not 'all')", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--candidates", ","),
+     no_output(expect_error(Exception, "candidates is empty", "slip_sinkage", rc=2)))
 case("diagnose-benchmark --cases 0", "diagnosis option",
      lambda t: cli("diagnose-benchmark", "--out", t / "d", "--cases", 0),
      no_output(expect_error(Exception, "n_cases", ">= 1", rc=2)))

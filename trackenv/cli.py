@@ -186,10 +186,10 @@ def cmd_diagnose(args) -> int:
     from trackenv.diagnose.core import check_options
     from trackenv.outputs import prepare_output_dir
 
-    check_options(seed=args.seed, polish_iters=args.polish_iters, alpha=args.alpha)  # before the output folder is made
-    prepare_output_dir(args.out, "diagnose", force=args.force, inputs=(args.folder,))
     only = [x for x in args.tests.split(",") if x] if args.tests else None
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None
+    check_options(seed=args.seed, polish_iters=args.polish_iters, alpha=args.alpha, candidates=cands)  # before --out is made
+    prepare_output_dir(args.out, "diagnose", force=args.force, inputs=(args.folder,))
     d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
                  seed=args.seed, figures=not args.no_figures, progress=True, polish_iters=args.polish_iters,
                  alpha=args.alpha, vehicle=args.vehicle)

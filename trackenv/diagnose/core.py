@@ -503,11 +503,13 @@ def is_integer(x) -> bool:
 
 
 def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4,
-                  alpha: float = ALPHA, substep: float = FIT_SUBSTEP, pad_s: float | None = None) -> None:
+                  alpha: float = ALPHA, substep: float = FIT_SUBSTEP, pad_s: float | None = None,
+                  candidates: list[str] | None = None) -> None:
     """Raise :class:`.data.DiagnosisError` naming the option if a fit or rule option of :func:`diagnose` cannot
     work: ``seed`` (an integer >= 0), ``rounds`` and ``polish_iters`` (integers >= 0), ``search_points`` (an
     integer >= 1), ``alpha`` (strictly between 0 and 1), ``substep`` (:func:`trackenv.simulate.check_substep`),
-    ``pad_s`` (None or a positive duration [s]). Checked before any log is read or any fit starts."""
+    ``pad_s`` (None or a positive duration [s]), ``candidates`` (None for all, or at least one name: an empty list
+    is not "all of them"). Checked before any log is read or any fit starts."""
     from ..simulate import MAX_SUBSTEP, check_substep
 
     for name, value, low, what in (("seed", seed, 0, "an integer >= 0"), ("rounds", rounds, 0, "an integer >= 0"),
@@ -523,6 +525,9 @@ def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, po
         raise DiagnosisError(f"the fits' {exc}") from None
     if pad_s is not None and not (isinstance(pad_s, (int, float, np.floating)) and np.isfinite(pad_s) and pad_s > 0):
         raise DiagnosisError(f"pad_s must be a positive duration [s] or None, got {pad_s!r}")
+    if candidates is not None and not list(candidates):
+        names = ", ".join(c.name for c in candidate_set())
+        raise DiagnosisError(f"candidates is empty: name at least one of {names}, or leave the option out for all of them")
 
 
 def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: list[str] | None = None,
@@ -556,7 +561,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     from .polish import JACOBIANS
 
     check_options(seed=seed, rounds=rounds, search_points=search_points, polish_iters=polish_iters, alpha=alpha,
-                  substep=substep, pad_s=pad_s)
+                  substep=substep, pad_s=pad_s, candidates=candidates)
 
     if jacobian not in JACOBIANS:
         raise DiagnosisError(f"jacobian must be one of {', '.join(JACOBIANS)}, got {jacobian!r}")
