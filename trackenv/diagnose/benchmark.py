@@ -26,7 +26,7 @@ import numpy as np
 
 from .blind import NEAR_LIMIT
 from .candidates import NONE
-from .core import check_options, diagnose, is_integer
+from .core import check_options, diagnose, is_integer, is_positive
 from .data import DiagnosisError
 
 LABELS = ("slip_sinkage", "lateral_friction_radius", "internal_resistance", "grouser_stiction", "pitch_load_transfer",
@@ -186,7 +186,7 @@ def check_benchmark_options(*, n_cases: int, labels: list[str] | None = None, nu
             raise DiagnosisError(f"{name} must be a fraction in [0, 1], got {value!r}")
     if n_tests is not None and not (is_integer(n_tests) and 1 <= n_tests <= MAX_TESTS):
         raise DiagnosisError(f"n_tests (tests per case) must be an integer from 1 to {MAX_TESTS}, got {n_tests!r}")
-    if t_max is not None and not (isinstance(t_max, (int, float, np.floating)) and np.isfinite(t_max) and t_max > 0):
+    if t_max is not None and not is_positive(t_max):
         raise DiagnosisError(f"t_max (the longest test) must be a positive duration [s], got {t_max!r}")
 
 

@@ -502,6 +502,11 @@ def is_integer(x) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
 
 
+def is_positive(x) -> bool:
+    """True for a finite Python or numpy number > 0 (not a bool)."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and bool(np.isfinite(x) and x > 0)
+
+
 def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4,
                   alpha: float = ALPHA, substep: float = FIT_SUBSTEP, pad_s: float | None = None,
                   candidates: list[str] | None = None) -> None:
@@ -523,7 +528,7 @@ def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, po
         check_substep(substep, MAX_SUBSTEP)
     except ValueError as exc:
         raise DiagnosisError(f"the fits' {exc}") from None
-    if pad_s is not None and not (isinstance(pad_s, (int, float, np.floating)) and np.isfinite(pad_s) and pad_s > 0):
+    if pad_s is not None and not is_positive(pad_s):
         raise DiagnosisError(f"pad_s must be a positive duration [s] or None, got {pad_s!r}")
     if candidates is not None and not list(candidates):
         names = ", ".join(c.name for c in candidate_set())

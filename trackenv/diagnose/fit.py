@@ -63,6 +63,7 @@ from .batch import BatchSimulator
 from .candidates import ON, Candidate
 from .data import TestData
 from .metrics import MODEL_FLOOR, signal_error, signal_weight  # noqa: F401  (MODEL_FLOOR: the loss's floor)
+from .polish import points_per_evaluation
 
 MAX_FOLDS = 12
 ENCODER_WINDOWS = (0.0, 0.05, 0.1, 0.2, 0.35)  # s, the encoder layer every candidate but none carries
@@ -256,8 +257,7 @@ def fit_plan(cand: Candidate, n_tests: int, n_fits: int, *, per_fold: int = 3, m
         return n_tests
     m = search_size(n_fits, per_fold, min_round)
     search = n_fits * m * n_branch + rounds * n_fits * refined * m
-    per_point = 1 + (2 if jacobian == "secant" else 1) * p
-    polish = (1 + polish_iters) * n_fits * refined * per_point if polish_iters > 0 else 0
+    polish = (1 + polish_iters) * n_fits * refined * points_per_evaluation(p, jacobian) if polish_iters > 0 else 0
     return n_tests * (search + polish)
 
 

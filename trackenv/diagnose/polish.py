@@ -47,6 +47,12 @@ SECANT_STEP = 0.05  # logit units (≈ 1.2 % of a parameter's range at mid-cube)
 JACOBIANS = ("secant", "forward")
 
 
+def points_per_evaluation(n_params: int, jacobian: str = "secant") -> int:
+    """Parameter points one polish evaluation simulates per fit: the point and its Jacobian's, 2p for the secant
+    (±``SECANT_STEP`` per parameter) or p tangents for forward mode."""
+    return 1 + (2 if jacobian == "secant" else 1) * n_params
+
+
 def _to_physical_jnp(spec, u):
     if spec.log:
         return jnp.exp(math.log(spec.lo) + u * (math.log(spec.hi) - math.log(spec.lo)))
@@ -175,7 +181,7 @@ class _Problem:
         # counted here, outside any trace, as :attr:`.batch.BatchSimulator.n_vehicle_seconds` counts the search's:
         # the rows simulated (a forward-mode pass counts its p tangents too, as ``n_simulations`` does)
         if not self.cand.instrument_only:
-            rows = z.shape[0] * (1 + (2 if jacobian == "secant" else 1) * z.shape[1])
+            rows = z.shape[0] * points_per_evaluation(z.shape[1], jacobian)
             self.sim.n_vehicle_seconds += rows * sum(len(b.tests) * b.n_steps * b.dt for b in self.sim.buckets)
         return np.asarray(r, np.float64), np.asarray(J, np.float64), pred
 
@@ -224,7 +230,7 @@ def polish_folds(sim, cand: Candidate, fold_defs, units, windows, scores, *, ite
     z = np.log(u0) - np.log1p(-u0)
     if jacobian not in JACOBIANS:
         raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
-    per_call = sum(len(b.tests) for b in sim.buckets) * F * (1 + (2 if jacobian == "secant" else 1) * p)
+    per_call = sum(len(b.tests) for b in sim.buckets) * F * points_per_evaluation(p, jacobian)
     r, J, pred = prob(z, jacobian)
     n_calls = 1
     if progress:
