@@ -1,6 +1,6 @@
 """The bad-input table: every kind of input a user touches, one parametrised test.
 
-Each row is one bad (or borderline) input: a log folder, a config, an env action or option, a CLI option,
+Each row is one bad (or borderline) input: a log folder, a config, a simulate call, an env action or option, a CLI option,
 a policy zip, a diagnosis folder or a diagnosis option. A row either expects a clear error (its type, the exit code 2 for a
 CLI row, and the file / column / row / key the message must name) or a documented behaviour (a
 conversion, a warning), which the row asserts. No row may produce a traceback from deep inside a
@@ -269,6 +269,41 @@ case("training config unknown key", "config",
                            cli("train", "go_stop", "--config", p))[1])(t / "ppo_bad.yaml"),
      expect_error(Exception, "ppo_bad.yaml", "learning_rat", rc=2))
 
+# --- the simulate API ----------------------------------------------------------------------------
+def _simulate(**kw):
+    args = dict(params=te.load_params(), profile=te.VoltageProfile.constant(5.0, 5.0), t_end=1.0) | kw
+    return call(lambda: te.simulate(args.pop("params"), args.pop("profile"), args.pop("t_end"), **args))
+
+
+def _load_params_effect_id(t):
+    return call(lambda: [e.id for e in te.load_params("dry_sand", effects=["slip_sinkage"]).effects])
+
+
+case("load_params effects=['slip_sinkage'], an id (documented: as the environments take it)", "simulate call",
+     _load_params_effect_id,
+     lambda o, t: (o.exc is None and o.value == ["slip_sinkage"]) or pytest.fail(o.text or str(o.value)))
+case("load_params with an unknown effect id", "simulate call",
+     lambda t: call(lambda: te.load_params("dry_sand", effects=["slip_sinkag"])),
+     expect_error(ValueError, "'slip_sinkag'", "slip_sinkage"))
+case("simulate given a dict for params", "simulate call",
+     lambda t: _simulate(params={"vehicle.mass": 20.0}),
+     expect_error(TypeError, "params", "trackenv.Params", "dict"))
+case("simulate given an int for the initial state", "simulate call",
+     lambda t: _simulate(initial=3),
+     expect_error(TypeError, "initial", "trackenv.State", "int"))
+case("simulate t_end=True, a bool (not 1 s)", "simulate call",
+     lambda t: _simulate(t_end=True),
+     expect_error(ValueError, "t_end", "True"))
+case("simulate dt=0", "simulate call",
+     lambda t: _simulate(dt=0.0),
+     expect_error(ValueError, "dt", "positive"))
+case("voltage breakpoints of ragged rows", "simulate call",
+     lambda t: call(lambda: te.VoltageProfile.from_breakpoints([(0.0, 1.0, 1.0), (0.5,)])),
+     expect_error(ValueError, "breakpoints", "rows [t, v_left, v_right]"))
+case("voltages with a text cell", "simulate call",
+     lambda t: call(lambda: te.VoltageProfile.from_arrays([0.0, 1.0], [[1.0, "x"], [1.0, 1.0]])),
+     expect_error(ValueError, "profile", "voltages", "'x'"))
+
 # --- env actions and options ---------------------------------------------------------------------
 case("domain_randomization negative mass range", "env option",
      lambda t: call(lambda: gym.make("trackenv/GoStop-v0", domain_randomization={"vehicle.mass": (-20.0, -10.0)})),
@@ -314,6 +349,15 @@ case("negative control_dt", "env option",
 case("unknown terrain", "env option",
      lambda t: call(lambda: gym.make("trackenv/GoStop-v0", terrain="moon_dust")),
      expect_error(te.ConfigError, "moon_dust", "dry_sand"))
+case("control_dt=True, a bool (not 1 s)", "env option",
+     lambda t: call(lambda: gym.make("trackenv/GoStop-v0", control_dt=True)),
+     expect_error(ValueError, "control_dt", "True"))
+case("normalize_action='yes', a string (not a bool)", "env option",
+     lambda t: call(lambda: gym.make("trackenv/GoStop-v0", normalize_action="yes")),
+     expect_error(ValueError, "normalize_action", "'yes'"))
+case("make_vec num_envs=True, a bool (not 1 environment)", "env option",
+     lambda t: call(lambda: gym.make_vec("trackenv/GoStop-v0", num_envs=True, vectorization_mode="vector_entry_point")),
+     expect_error(ValueError, "num_envs", "True"))
 
 
 def _env(t, **kw):
@@ -527,7 +571,7 @@ def test_bad_input(run, check, tmp_path):
 
 def test_table_covers_every_input_kind():
     kinds = {p.id.split(":")[0] for p in CASES}
-    assert kinds >= {"log folder", "config", "env option", "env action", "CLI option", "policy zip",
+    assert kinds >= {"log folder", "config", "simulate call", "env option", "env action", "CLI option", "policy zip",
                      "diagnosis folder", "diagnosis option"}
 
 

@@ -138,10 +138,11 @@ def make_field_twin(out_dir: str | Path = "data/field/thesis", seed: int = 0, sa
     from .field_profiles import list_field_tests, load_field_profile
     from .fieldlog import read_field_log, write_log_columns
     from .instruments import ammeter
+    from .params import is_integer
 
     if not (sample_rate > 0 and math.isfinite(sample_rate)):
         raise ValueError(f"sample_rate must be a positive number of Hz, got {sample_rate!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+    if not (is_integer(seed) and seed >= 0):
         raise ValueError(f"seed (of the instrument noise) must be an integer >= 0, got {seed!r}")
     known = list_field_tests()
     ids = known if tests is None else list(tests)

@@ -280,6 +280,17 @@ def fmt_num(x: Any) -> str:
     return f"{v:.10g}"
 
 
+def is_integer(x: Any) -> bool:
+    """True for a Python or numpy integer (not a bool): the type of a count, a seed or an index."""
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+
+def is_positive(x: Any) -> bool:
+    """True for a finite Python or numpy number > 0 (not a bool): a duration, a rate or a length."""
+    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+            and bool(np.isfinite(x) and x > 0))
+
+
 def _bound_text(lo, lo_strict, hi, hi_strict, scale: float = 1.0, unit: str = "") -> str:
     parts = []
     u = f" {unit}" if unit and unit != "-" else ""
@@ -562,7 +573,8 @@ def load_params(
         vehicle: a ``configs/vehicle`` id or a YAML path.
         internal_resistance: ``"constant"`` (Table 5.4, the thesis's final model) or ``"viscous"``
             (Table 5.3, its first model).
-        effects: effect modules to add to the base model (docs/model.md §8).
+        effects: effects to add to the base model (docs/model.md §8): ids (``"slip_sinkage"``, with its
+            default parameters) or :class:`trackenv.effects.Effect` modules, as the environments take them.
         dtype: ``jnp.float32`` (default) or ``jnp.float64``; float64 needs ``jax_enable_x64``.
     """
     dtype = jnp.dtype(dtype)
@@ -583,7 +595,9 @@ def load_params(
         ir = InternalResistance(constant=jnp.asarray(internal["constant"], dtype), viscous=zero)
     else:
         ir = InternalResistance(constant=zero, viscous=jnp.asarray(internal["viscous"], dtype))
-    return validate_params(Params(vehicle=veh, terrain=ter, internal=ir, effects=tuple(effects)))
+    from .effects import resolve_effects
+
+    return validate_params(Params(vehicle=veh, terrain=ter, internal=ir, effects=resolve_effects(effects, dtype)))
 
 
 def replace(params: Params, **changes: Any) -> Params:

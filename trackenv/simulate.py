@@ -33,6 +33,7 @@ import numpy as np
 from . import instruments, parallel
 from .integrate import advance, is_physical, physical_bounds
 from .parallel import cpu_devices, shard, split_count
+from .params import Params, is_positive
 from .physics import sums
 from .physics.model import State, drive_voltage, initial_state, prescribed_speed_current
 
@@ -51,7 +52,7 @@ class SimulationDiverged(RuntimeError):
 
 def check_substep(substep, interval: float, interval_name: str = "dt") -> None:
     """Raise ``ValueError`` naming the parameter if ``substep`` is not in (0, min(MAX_SUBSTEP, interval)]."""
-    if not (isinstance(substep, (int, float, np.floating)) and math.isfinite(substep) and substep > 0):
+    if not is_positive(substep):
         raise ValueError(f"substep must be a positive number of seconds, got {substep!r}")
     if substep > MAX_SUBSTEP * (1 + 1e-9):
         raise ValueError(
@@ -59,6 +60,14 @@ def check_substep(substep, interval: float, interval_name: str = "dt") -> None:
             f"(the verified default is {DEFAULT_SUBSTEP:g} s)")
     if substep > interval * (1 + 1e-9):
         raise ValueError(f"substep = {substep:g} s exceeds {interval_name} = {interval:g} s; use a substep <= {interval_name}")
+
+
+def _float_array(values, what: str, source: str) -> np.ndarray:
+    """``values`` as a float64 array, or a ``ValueError`` naming ``source`` and ``what`` (not numpy's)."""
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{source}: the {what} must be numbers in a regular array, got {values!r}") from None
 
 
 class VoltageProfile(eqx.Module):
@@ -74,7 +83,7 @@ class VoltageProfile(eqx.Module):
     @classmethod
     def from_breakpoints(cls, rows, dtype=jnp.float32, source: str = "breakpoints") -> VoltageProfile:
         """From rows ``[t, v_left, v_right]``."""
-        arr = np.asarray(rows, dtype=np.float64)
+        arr = _float_array(rows, "rows [t, v_left, v_right]", source)
         if arr.ndim != 2 or arr.shape[1] != 3:
             raise ValueError(f"{source}: expected rows [t, v_left, v_right], got an array of shape {arr.shape}")
         return cls.from_arrays(arr[:, 0], arr[:, 1:], dtype=dtype, source=source)
@@ -82,8 +91,8 @@ class VoltageProfile(eqx.Module):
     @classmethod
     def from_arrays(cls, t, volts, dtype=jnp.float32, source: str = "profile") -> VoltageProfile:
         """From times (K,) and voltages (K, 2[, *b]); validated (see :func:`validate_profile`)."""
-        t = np.asarray(t, dtype=np.float64)
-        volts = np.asarray(volts, dtype=np.float64)
+        t = _float_array(t, "times", source)
+        volts = _float_array(volts, "voltages", source)
         validate_profile(t, volts, source=source)
         t, volts = _hold_single_sample(t, volts)
         return cls(jnp.asarray(t, dtype), jnp.asarray(volts, dtype))
@@ -115,8 +124,8 @@ class SpeedProfile(eqx.Module):
     @classmethod
     def from_arrays(cls, t, omega, dtype=jnp.float32, source: str = "speed profile") -> SpeedProfile:
         """From times (K,) and sprocket speeds (K, 2[, *b]) [rad/s]; validated (finite, increasing times)."""
-        t = np.asarray(t, dtype=np.float64)
-        omega = np.asarray(omega, dtype=np.float64)
+        t = _float_array(t, "times", source)
+        omega = _float_array(omega, "sprocket speeds", source)
         validate_speeds(t, omega, source=source)
         t, omega = _hold_single_sample(t, omega)
         return cls(jnp.asarray(t, dtype), jnp.asarray(omega, dtype))
@@ -473,10 +482,14 @@ def simulate(
     Returns:
         :class:`Trajectory` with the state, the instrument channels and the voltages at each ``dt``.
     """
-    if not (isinstance(t_end, (int, float, np.floating)) and math.isfinite(t_end) and t_end > 0):
+    if not isinstance(params, Params):
+        raise TypeError(f"params must be a trackenv.Params (trackenv.load_params), got {type(params).__name__}")
+    if initial is not None and not isinstance(initial, State):
+        raise TypeError(f"initial must be a trackenv.State (trackenv.initial_state) or None, got {type(initial).__name__}")
+    if not is_positive(t_end):
         raise ValueError(f"t_end must be a positive finite number of seconds, got {t_end!r}")
-    if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"dt must be positive, got {dt!r}")
+    if not is_positive(dt):
+        raise ValueError(f"dt must be a positive finite number of seconds, got {dt!r}")
     check_substep(substep, dt, "dt")
     n_steps = int(round(t_end / dt))
     if abs(n_steps * dt - t_end) > 1e-9 * max(1.0, t_end) or n_steps < 1:

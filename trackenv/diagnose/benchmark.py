@@ -24,9 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..params import is_integer, is_positive
 from .blind import NEAR_LIMIT
 from .candidates import NONE
-from .core import check_options, diagnose, is_integer, is_positive
+from .core import check_options, diagnose
 from .data import DiagnosisError
 
 LABELS = ("slip_sinkage", "lateral_friction_radius", "internal_resistance", "grouser_stiction", "pitch_load_transfer",

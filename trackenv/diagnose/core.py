@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..compare import json_clean as _clean
+from ..params import is_integer, is_positive
 from .batch import FIT_SUBSTEP, BatchSimulator
 from .candidates import NONE, ON_BASE, RECALIBRATE, candidate_set, effect_of
 from .data import DiagnosisError, TestData, load_tests
@@ -495,16 +496,6 @@ def load_evidence(path: Path) -> dict:
     ev["err_held"] = {n: [d[j] for j in sorted(d)] for n, d in err.items()}
     ev["noise"] = [{sig: tuple(v) for sig, v in d.items()} for d in ev["noise"]]
     return ev
-
-
-def is_integer(x) -> bool:
-    """True for a Python or numpy integer (not a bool)."""
-    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
-
-
-def is_positive(x) -> bool:
-    """True for a finite Python or numpy number > 0 (not a bool)."""
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool) and bool(np.isfinite(x) and x > 0)
 
 
 def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4,

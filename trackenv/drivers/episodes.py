@@ -53,6 +53,7 @@ import numpy as np
 
 from ..envs.controllers import OpenLoop, classical_for, load_gains
 from ..envs.tasks import task_class
+from ..params import is_integer
 from .config import repo_relative, resolve_task, resolve_terrain
 from .policy import Learned, check_observation_space, load_policy
 from .wrappers import EpisodeRecorder
@@ -118,9 +119,9 @@ def evaluate(task: str, terrain: str = "dry_sand", policy: str | Path | Any | No
     task = resolve_task(task)
     terrain = resolve_terrain(terrain)
     sim_t = resolve_terrain(sim_terrain) if sim_terrain else terrain
-    if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) or episodes < 1:
+    if not (is_integer(episodes) and episodes >= 1):
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+    if not (is_integer(seed) and seed >= 0):
         raise ValueError(f"seed (the first episode's) must be an integer >= 0, got {seed!r}")
     methods = tuple(methods)
     bad = [m for m in methods if m not in METHODS]

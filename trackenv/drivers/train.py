@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..envs.tasks import task_class
-from ..params import ConfigError
+from ..params import ConfigError, is_integer
 from .config import (
     ROOT,
     algo_class,
@@ -233,7 +233,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
     algo = resolve_algo(algo)
     cfg = load_config(algo, task, terrain, config)
     if timesteps is not None:
-        if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < 1:
+        if not (is_integer(timesteps) and timesteps >= 1):
             raise ConfigError(f"timesteps must be a positive integer, got {timesteps!r}")
         cfg["n_timesteps"] = int(timesteps)
     check_budget(cfg, algo, where="--timesteps" if timesteps is not None else "n_timesteps")

@@ -53,10 +53,10 @@ __all__ = ["resolve_effects", "Effect", "effect_ids", "EFFECTS", "EFFECT_IDS", "
            "InternalResistance", "GrouserStiction", "PitchLoadTransfer", "SensorArtifacts"]
 
 
-def resolve_effects(effects) -> tuple:
+def resolve_effects(effects, dtype=jnp.float32) -> tuple:
     """Effect ids (docs/model.md §8) or :class:`Effect` modules -> a tuple of modules for ``load_params``.
 
-    Ids get their default parameters (:func:`get_effect`); an unknown id raises ``ValueError``
+    Ids get their default parameters in ``dtype`` (:func:`get_effect`); an unknown id raises ``ValueError``
     listing the known ones; anything that is neither raises ``TypeError``. A single id or module may be
     given without a list (``effects="slip_sinkage"`` is ``("slip_sinkage",)``).
     """
@@ -65,7 +65,7 @@ def resolve_effects(effects) -> tuple:
     out = []
     for e in tuple(effects or ()):
         if isinstance(e, str):
-            out.append(get_effect(e))
+            out.append(get_effect(e, dtype))
         elif isinstance(e, Effect):
             out.append(e)
         else:

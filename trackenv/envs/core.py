@@ -46,7 +46,7 @@ import numpy as np
 
 from ..effects import resolve_effects
 from ..integrate import advance_constant, is_physical
-from ..params import ConfigError, Params, load_params
+from ..params import ConfigError, Params, is_positive, load_params
 from ..physics.model import State, initial_state
 from ..simulate import DEFAULT_SUBSTEP, check_substep, n_substeps
 from . import randomization
@@ -167,9 +167,11 @@ def make_params(
     """
     if task not in TASKS:
         raise ValueError(f"unknown task {task!r}; known: {', '.join(TASKS)}")
-    if not (isinstance(control_dt, (int, float)) and math.isfinite(control_dt) and control_dt > 0):
+    if not is_positive(control_dt):
         raise ValueError(f"control_dt must be a positive number of seconds, got {control_dt!r}")
     check_substep(substep, control_dt, "control_dt")
+    if not isinstance(normalize_action, (bool, np.bool_)):
+        raise ValueError(f"normalize_action must be True or False, got {normalize_action!r}")
     if physics_batching not in ("vmap", "native"):
         raise ValueError(f"physics_batching must be 'vmap' or 'native', got {physics_batching!r}")
     from_names = sim_params is None

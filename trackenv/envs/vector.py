@@ -65,6 +65,7 @@ from gymnasium.vector.utils import batch_space
 
 from .. import parallel
 from ..parallel import run_split, shard
+from ..params import is_integer
 from ..physics import sums
 from . import core, rows
 from .core import ENV_DEFAULT_SUBSTEP
@@ -143,7 +144,7 @@ class TrackVectorEnv(VectorEnv):
                  render_mode: str | None = None, domain_randomization=False, normalize_action: bool = False,
                  vehicle: str = "packbot", internal_resistance: str = "constant", physics_batching: str = "loop",
                  params: core.EnvParams | None = None, **task_kwargs):
-        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+        if not (is_integer(num_envs) and num_envs >= 1):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
