@@ -544,7 +544,8 @@ def anchors_without_nan(o: Outcome, tmp: Path):
     assert "replay with a smaller dt" in o.text and "nan" not in o.text.lower(), o.text
     met = (tmp / "out" / "metrics.json").read_text()
     assert "NaN" not in met
-    assert all(a["simulated"] is None and "dt = 5 s" in a["note"] for a in json.loads(met)["anchors"])
+    assert all(a["simulated"] is None and a["missing"] == "output_step" and "dt = 5 s" in a["note"]
+               for a in json.loads(met)["anchors"])
 
 
 case("replay of a thesis test with --dt 5 (longer than its anchors' window)", "CLI option",

@@ -118,7 +118,7 @@ def cmd_replay(args) -> int:
             if a["simulated"] is not None:
                 print(f"  anchor {a['signal']} {a['stat']} {a['t0']:g}-{a['t1']:g} s: thesis {a['thesis_field']:g} "
                       f"{a['unit']}, simulated {a['simulated']:.3f} ({a['rel_diff']:+.1%})")
-            elif a.get("note", "").startswith("no simulated sample"):
+            elif a.get("missing") == "output_step":
                 print(f"  anchor {a['signal']} {a['stat']}: {a['note']}")
     else:
         synth = " (a synthetic log)" if m["log_is_synthetic"] else ""

@@ -320,7 +320,11 @@ def _replay_log(folder, out, terrain, internal, effect_modules, effect_names, su
 
 
 def anchor_metrics(prof, traj, dt: float) -> list[dict]:
-    """A thesis test's text anchors (configs/field) beside the simulated values, for trajectories sampled every ``dt``."""
+    """A thesis test's text anchors (configs/field) beside the simulated values, for trajectories sampled every ``dt``.
+
+    An anchor without a simulated value says why in ``missing``: ``"output_step"`` (no output sample in its window
+    at this ``dt``; a smaller ``dt`` gives one) or ``"base_model"`` (not comparable from the base model alone), and
+    in ``note``."""
     t = np.arange(np.asarray(traj.t).shape[0]) * dt
     ch = {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}
     rows = []
@@ -331,7 +335,7 @@ def anchor_metrics(prof, traj, dt: float) -> list[dict]:
         if a["stat"] == "mean" and a["t0"] is not None and a["t1"] is not None:
             m = (t >= a["t0"] - 1e-9) & (t <= a["t1"] + 1e-9)
             if not m.any():  # an output step longer than the window: no mean to compare, not a NaN
-                row.update(simulated=None, rel_diff=None,
+                row.update(simulated=None, rel_diff=None, missing="output_step",
                            note=f"no simulated sample in {a['t0']:g}-{a['t1']:g} s at the output step dt = {dt:g} s; "
                                 "replay with a smaller dt")
                 rows.append(row)
@@ -343,7 +347,7 @@ def anchor_metrics(prof, traj, dt: float) -> list[dict]:
         row["simulated"] = sim
         row["rel_diff"] = (sim - a["value"]) / a["value"] if sim is not None and a["value"] else None
         if sim is None:
-            row["note"] = "not comparable from a base-model simulation alone (see configs/field)"
+            row.update(missing="base_model", note="not comparable from a base-model simulation alone (see configs/field)")
         rows.append(row)
     return rows
 
