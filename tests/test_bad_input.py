@@ -525,6 +525,28 @@ case("diagnose(search_points=0)", "diagnosis option",
 case("diagnose --candidates , (an empty list, not 'all')", "diagnosis option",
      lambda t: cli("diagnose", TWIN, "--out", t / "d", "--candidates", ","),
      no_output(expect_error(Exception, "candidates is empty", "slip_sinkage", rc=2)))
+
+
+def _report(folder: Path, effect: str = "slip_sinkage") -> Path:
+    """An earlier diagnosis's report.json (the fields ``--after`` reads), naming ``effect``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    params = {} if effect == "none" else {"sinkage_rate": 0.4, "bulldozing_factor": 1.5, "max_sinkage": 0.03}
+    (folder / "report.json").write_text(json.dumps({
+        "verdict": {"effect": effect, "after_model": effect}, "ranking": [{"effect": effect, "params": params}],
+        "base_model": {"internal_resistance": "constant"}}))
+    return folder / "report.json"
+
+
+case("diagnose --after a report whose verdict is none", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--after", _report(t / "first", "none")),
+     no_output(expect_error(Exception, lambda t: t / "first" / "report.json", "names no effect", rc=2)))
+case("diagnose --after a report that does not exist", "diagnosis option",
+     lambda t: cli("diagnose", TWIN, "--out", t / "d", "--after", t / "nowhere" / "report.json"),
+     no_output(expect_error(Exception, "nowhere", "no such report", rc=2)))
+case("diagnose --after, --out into the folder of that report", "diagnosis option",
+     lambda t: (lambda r: cli("diagnose", TWIN, "--out", r.parent, "--after", r))(_report(t / "first")),
+     expect_error(Exception, "first", "overwrite the input", rc=2))
+
 case("diagnose-benchmark --cases 0", "diagnosis option",
      lambda t: cli("diagnose-benchmark", "--out", t / "d", "--cases", 0),
      no_output(expect_error(Exception, "n_cases", ">= 1", rc=2)))

@@ -898,3 +898,110 @@ def test_an_effects_two_fits_share_one_polish_simulation(tmp_path):
             {k: fit.full.params[f"recalibrate_base.{k}"] for k in fitted})
     assert {k: float(_values(on_base, {"recalibrate_base": control})[1][ON + k][0]) for k in fitted} == \
         pytest.approx({k: recal.anchor[k] for k in fitted})
+
+
+SLIP = {"sinkage_rate": 0.4, "bulldozing_factor": 1.5, "max_sinkage": 0.03}  # a slip_sinkage fit, its family's names
+
+
+def _report_naming(path, member="slip_sinkage@base", params=None, effect=None, internal_resistance="constant",
+                   after=(), window=0.1):
+    """A report.json as a diagnosis writes it, naming ``member`` at ``params`` with an encoder ``window`` [s]
+    (the fields ``after=`` reads)."""
+    params = dict(SLIP if params is None else params)
+    rep = {"verdict": {"effect": effect or effect_of(member), "after_model": member},
+           "ranking": [{"effect": member, "params": params | {"encoder_window": window}}],
+           "base_model": {"internal_resistance": internal_resistance, "after": list(after)}}
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "report.json").write_text(json.dumps(rep))
+    return path / "report.json"
+
+
+def test_a_named_fit_joins_the_base_model_as_its_family_predicts_it(tmp_path):
+    """``after=``: the base model of the next diagnosis is the named fit, simulated exactly as the candidate
+    family simulated it (the control's factors and the effect at the report's values, and its encoder window),
+    and a chain of reports carries every earlier fit in order."""
+    from trackenv.diagnose.batch import BatchSimulator
+    from trackenv.diagnose.candidates import named_fits_from_report
+
+    data, _ = load_tests(_base_case(tmp_path / "case"), None)
+    cands = {c.name: c for c in candidate_set()}
+    first = named_fits_from_report(_report_naming(tmp_path / "r1", window=0.0), "constant")
+    assert [nf.member for nf in first] == ["slip_sinkage@base"]
+    plain = BatchSimulator(data).run(cands["none"], {})[0]
+    after = BatchSimulator(data, named=first).run(cands["none"], {})[0]
+    as_candidate = BatchSimulator(data).run(cands["slip_sinkage"], {k: np.array([v]) for k, v in SLIP.items()})[0]
+    turn = [t.name for t in data].index("turn")
+    assert np.max(np.abs(after[turn]["yaw_rate"] - plain[turn]["yaw_rate"])) > 0.05  # the sinkage acts
+    for j in range(len(data)):
+        for sig in after[j]:
+            np.testing.assert_array_equal(after[j][sig], as_candidate[j][sig])
+    # the fit's encoder window is carried too: the speed the encoder reports is averaged over it (inside the
+    # simulation, in float32 and exact for piecewise-linear samples; the encoder layer interpolates its integral)
+    windowed = BatchSimulator(data, named=named_fits_from_report(_report_naming(tmp_path / "r1w"), "constant"))
+    speed = windowed.run(cands["none"], {})[0]
+    layer = BatchSimulator(data).run(cands["slip_sinkage"], {k: np.array([v]) for k, v in SLIP.items()},
+                                     windows=(0.1,))[0]
+    for j in range(len(data)):
+        assert np.max(np.abs(speed[j]["speed_ideal"] - after[j]["speed_ideal"])) > 0.02
+        np.testing.assert_allclose(speed[j]["speed_ideal"], layer[j]["speed_ideal"], rtol=0, atol=3e-3)
+        np.testing.assert_array_equal(speed[j]["yaw_rate"], after[j]["yaw_rate"])
+    # a second report, made after the first: both fits join, the first one first
+    ir = {"b0_factor": 2.0, "s1": 0.0, "s2": 0.0, "s3": 0.0, "recalibrate_base.cohesion_factor": 1.2,
+          "recalibrate_base.internal_resistance_factor": 1.0, "recalibrate_base.friction_angle_factor": 1.0,
+          "recalibrate_base.shear_modulus_factor": 1.0}
+    chain = named_fits_from_report(_report_naming(tmp_path / "r2", "internal_resistance", ir,
+                                                  after=[nf.to_json() for nf in first]), "constant")
+    assert [nf.member for nf in chain] == ["slip_sinkage@base", "internal_resistance"]
+    assert chain[1].candidate.on is not None and chain[1].values["on.cohesion_factor"] == 1.2
+    base, _ = BatchSimulator(data, named=chain).stacked_base(BatchSimulator(data).buckets[0], 1)
+    assert [type(e).__name__ for e in base.effects] == ["SlipSinkage", "KnotInternalResistance", "SensorArtifacts"]
+    assert float(base.effects[2].window[0]) == pytest.approx(0.1) and float(base.effects[2].gyro_bias[0]) == 0.0
+    assert np.allclose(base.terrain.cohesion, 1.2 * np.asarray(te.load_params("dry_sand").terrain.cohesion))
+
+
+def test_after_refuses_a_report_that_names_no_fit_or_another_base(tmp_path):
+    from trackenv.diagnose.candidates import named_fits_from_report
+
+    with pytest.raises(DiagnosisError, match="names no effect"):
+        named_fits_from_report(_report_naming(tmp_path / "none", "none", {}, effect="none"), "constant")
+    with pytest.raises(DiagnosisError, match="'viscous' internal resistance"):
+        named_fits_from_report(_report_naming(tmp_path / "visc", internal_resistance="viscous"), "constant")
+    with pytest.raises(DiagnosisError, match="lacks a finite value for max_sinkage"):
+        named_fits_from_report(_report_naming(tmp_path / "part", params={"sinkage_rate": 0.4,
+                                                                          "bulldozing_factor": 1.5}), "constant")
+    with pytest.raises(DiagnosisError, match="no such report"):
+        named_fits_from_report(tmp_path / "missing" / "report.json", "constant")
+
+
+def test_after_the_named_effect_the_diagnosis_finds_the_one_that_remains(tmp_path):
+    """Logs of the base model with a slip sinkage and a stronger internal resistance (2.2x b*_int, beyond the
+    control's 1.4x): given the sinkage as already named (at its true values), the diagnosis does not offer it
+    again, says what its base model carries, and names the internal resistance."""
+    from trackenv.effects import get_effect
+
+    rng = np.random.default_rng(3)
+    params = te.load_params("dry_sand")
+    params = te.load_params("dry_sand", effects=(get_effect("slip_sinkage", **SLIP),
+                                                 get_effect("internal_resistance", b0=2.2 * float(params.internal.constant))))
+    specs = {"go": [[0, 0, 0], [0.3, 11.8, 11.8], [3, 11.8, 11.8], [3.1, 0, 0], [5, 0, 0]],
+             "turn": [[0, 0, 0], [0.3, 10, 10], [1.5, 10, 10], [1.7, 5, 15], [3.5, 5, 15], [3.7, 0, 0], [5, 0, 0]]}
+    for name, rows in specs.items():
+        traj = te.simulate(params, te.VoltageProfile.from_breakpoints(rows), 5.0, dt=0.02)
+        noise = {"i_left": 0.08, "i_right": 0.08, "speed_ideal": 0.008, "yaw_rate": 0.015}
+        cols = {"t": np.asarray(traj.t, float), "v_left": np.asarray(traj.voltage[:, 0], float),
+                "v_right": np.asarray(traj.voltage[:, 1], float)}
+        cols.update({k: np.asarray(traj.channels[k], float) + rng.normal(0, s, len(cols["t"])) for k, s in noise.items()})
+        write_log_columns(tmp_path / "case" / name, cols, {"terrain": "dry_sand", "maneuver": name,
+                                                           "current_sensor": "signed", "synthetic": True,
+                                                           "notes": "SYNTHETIC test case: two effects + noise"})
+    report = _report_naming(tmp_path / "first", "slip_sinkage@base", SLIP, window=0.0)  # the logs have no window
+    d = diagnose(tmp_path / "case", tmp_path / "out", after=report, progress=False, rounds=1, polish_iters=2,
+                 candidates=["slip_sinkage", "internal_resistance", "recalibrate_base", "sensor_artifacts"],
+                 figures=False)
+    skipped = {r["effect"]: r["why"] for r in d.report["not_applicable"]}
+    assert "already in the base model" in skipped["slip_sinkage"], skipped
+    assert not any(effect_of(r["effect"]) == "slip_sinkage" for r in d.report["ranking"])
+    assert d.report["base_model"]["after"][0]["fit"] == "slip_sinkage@base"
+    assert d.verdict["verdict_line"].startswith("after slip_sinkage@base: ")
+    assert d.verdict["effect"] == "internal_resistance", d.verdict["verdict_line"]
+    assert "slip_sinkage@base" in (tmp_path / "out" / "report.md").read_text()

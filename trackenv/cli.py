@@ -189,10 +189,17 @@ def cmd_diagnose(args) -> int:
     only = [x for x in args.tests.split(",") if x] if args.tests else None
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None
     check_options(seed=args.seed, polish_iters=args.polish_iters, alpha=args.alpha, candidates=cands)  # before --out is made
-    prepare_output_dir(args.out, "diagnose", force=args.force, inputs=(args.folder,))
+    inputs = [args.folder]
+    if args.after is not None:
+        from trackenv.diagnose.candidates import named_fits_from_report
+
+        named_fits_from_report(args.after, args.internal_resistance)  # readable, and names an effect
+        after = Path(args.after)
+        inputs.append(after if after.is_dir() else after.parent)  # --out must not overwrite the report it continues
+    prepare_output_dir(args.out, "diagnose", force=args.force, inputs=inputs)
     d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
                  seed=args.seed, figures=not args.no_figures, progress=True, polish_iters=args.polish_iters,
-                 alpha=args.alpha, vehicle=args.vehicle)
+                 alpha=args.alpha, vehicle=args.vehicle, after=args.after)
     v = d.verdict
     print(f"{d.report['data_label']}")
     print(f"verdict: {v['verdict_line']}")
@@ -356,6 +363,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--alpha", type=float, default=0.05, help="significance level of the verdict rule")
     g.add_argument("--vehicle", default=None,
                    help="vehicle id or YAML path for every test instead of its meta.json vehicle (e.g. a calibrated one)")
+    g.add_argument("--after", default=None, metavar="REPORT",
+                   help="report.json (or its folder) of an earlier diagnosis: the fit it named joins the base model, "
+                        "and the candidates look for what remains")
     g.add_argument("--force", action="store_true",
                    help="write into the output folder even if it holds field logs trackenv did not write")
     g.set_defaults(func=cmd_diagnose)

@@ -128,8 +128,9 @@ class BatchSimulator:
     """Simulates candidates' parameter sets on every test; returns predictions at the logs' sample times."""
 
     def __init__(self, tests: list[TestData], internal_resistance: str = "constant", substep: float = FIT_SUBSTEP,
-                 pad_s: float | None = None, vehicle=None):
+                 pad_s: float | None = None, vehicle=None, named: tuple = ()):
         self.tests = tests
+        self.named = tuple(named)  # fits an earlier diagnosis named (.candidates.NamedFit), part of the base model
         self.vehicle = vehicle  # a vehicle id or YAML path replacing each log's meta.json vehicle (None: the log's)
         self.substep = substep
         self.internal_resistance = internal_resistance
@@ -204,13 +205,23 @@ class BatchSimulator:
                 progress(nb * S)
         return pred, diverged
 
+    def stacked_base(self, b: Bucket, S: int):
+        """The base model of bucket ``b``'s tests, each repeated ``S`` times (leaves (nb * S,), column ``q * S + s``),
+        with the fits an earlier diagnosis named (``named``) added, and the per-vehicle references of
+        :meth:`.candidates.Candidate.apply`."""
+        base = stack_trees([self.base[j] for j in b.tests])  # leaves (nb,)
+        base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
+        ref = {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)}
+        for nf in self.named:
+            base = nf.apply(base, ref)
+        return base, ref
+
     def _params(self, b: Bucket, cand: Candidate, values: dict, S: int):
         """Params of bucket ``b`` with ``S`` parameter sets of ``cand`` per test: leaves (nb * S,)."""
         nb = len(b.tests)
-        base = stack_trees([self.base[j] for j in b.tests])  # leaves (nb,)
-        base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
+        base, ref = self.stacked_base(b, S)
         vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
-        return cand.apply(base, vals, {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)})
+        return cand.apply(base, vals, ref)
 
     def _simulate(self, b: Bucket, params, n_vehicles: int) -> tuple[dict, np.ndarray]:
         """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,)."""
@@ -222,8 +233,7 @@ class BatchSimulator:
     def base_channels(self, bi: int, b: Bucket) -> dict:
         """The base model's raw channels of bucket ``bi`` (simulated once, then reused)."""
         if bi not in self._base_channels:
-            base = stack_trees([self.base[j] for j in b.tests])
-            self._base_channels[bi] = self._simulate(b, base, len(b.tests))
+            self._base_channels[bi] = self._simulate(b, self.stacked_base(b, 1)[0], len(b.tests))
         return self._base_channels[bi][0]
 
     def channels_on(self, bi: int, b: Bucket, below: Candidate, values: dict) -> dict:
@@ -253,7 +263,7 @@ class BatchSimulator:
             ch = {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
         params = self._params(b, dataclasses.replace(cand, on=None), own, S)
         t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
-        for eff in params.effects:
+        for eff in params.effects[-1:]:  # its own: the base's (a named fit's window) are in ``ch`` already
             ch = _instruments_jit(eff, {k: jnp.asarray(v, params.dtype) for k, v in ch.items()}, t, params)
         return {k: np.asarray(v, np.float64) for k, v in ch.items()}
 

@@ -174,6 +174,7 @@ class Candidate:
 
     def apply(self, base, values: dict, ref: dict):
         """Params for a batch: ``base`` has (B,) leaves; ``values`` {name: (B,)}; ``ref`` per-vehicle references.
+        An effect is added to the effects ``base`` already carries (a fit named by an earlier diagnosis, :class:`NamedFit`).
 
         ``ref["b_int_constant"]``: (B,) each vehicle's terrain b*_int (Table 5.4), used by ``internal_resistance``.
         """
@@ -198,7 +199,7 @@ class Candidate:
             return dataclasses.replace(base, terrain=ter, internal=itr, vehicle=veh)
         B = np.shape(next(iter(values.values())))[0]
         if self.name == "internal_resistance":
-            return dataclasses.replace(base, effects=(KnotInternalResistance(
+            return dataclasses.replace(base, effects=base.effects + (KnotInternalResistance(
                 b0=f(values["b0_factor"] * ref["b_int_constant"]), s1=f(values["s1"]), s2=f(values["s2"]),
                 s3=f(values["s3"])),))
         eff = get_effect(self.name, dtype=dtype)
@@ -211,7 +212,7 @@ class Candidate:
         if self.name == "sensor_artifacts":
             fields["ripple_amplitude"] = jnp.zeros((B,), dtype)
             fields["rectify"] = False
-        return dataclasses.replace(base, effects=(type(eff)(**fields),))
+        return dataclasses.replace(base, effects=base.effects + (type(eff)(**fields),))
 
 
 def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
@@ -265,3 +266,96 @@ def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
                   "control: refit the uncertain base parameters b*_int, c, phi, K (no new physics)"),
         Candidate(NONE, (), {}, "the base model as is"),
     ]
+
+
+@dataclass(frozen=True)
+class NamedFit:
+    """A fit that an earlier diagnosis named, carried into the base model of the next (``diagnose(after=...)``).
+
+    ``member`` is the fit's name in that report (``"slip_sinkage@base"``, ``"internal_resistance"`` ...),
+    ``candidate`` its family (standing on the control where ``values`` holds the control's factors under
+    ``ON``-prefixed keys), ``values`` {name: physical value} of its fit on all the data, ``source`` the report,
+    ``encoder_window`` [s] the encoder averaging window that fit selected (its instrument layer, carried as a
+    window-only ``sensor_artifacts``; the candidates of the next diagnosis may add a window of their own on top).
+    """
+
+    member: str
+    candidate: Candidate
+    values: dict
+    source: str
+    encoder_window: float = 0.0
+
+    @property
+    def effect(self) -> str:
+        return effect_of(self.member)
+
+    def apply(self, base, ref: dict):
+        """``base`` (leaves (B,)) with this fit added: the control's factors and the effect at its fitted values."""
+        B = int(np.shape(base.vehicle.mass)[0])
+        full = lambda values: {k: np.full(B, v, np.float64) for k, v in values.items()}  # noqa: E731
+        base = self.candidate.apply(base, full(self.values), ref)
+        if self.encoder_window > 0:
+            window_only = {"window": self.encoder_window, "gyro_bias": 0.0, "gyro_scale": 0.0,
+                           "current_offset_left": 0.0, "current_offset_right": 0.0}
+            base = _SENSOR_FAMILY.apply(base, full(window_only), ref)
+        return base
+
+    def to_json(self) -> dict:
+        return {"fit": self.member, "effect": self.effect, "report": self.source,
+                "params": {k: float(v) for k, v in self.values.items()}, "encoder_window": self.encoder_window}
+
+
+def named_fits_from_report(path, internal_resistance: str) -> tuple[NamedFit, ...]:
+    """The fits an earlier diagnosis's ``report.json`` adds to the base model: the ones its own base carried
+    (``base_model.after``), then the fit it named. Raises :class:`.data.DiagnosisError` naming the file where it
+    cannot be read, names no effect, or was made on another base model (``internal_resistance``)."""
+    import json
+    from pathlib import Path
+
+    from .data import DiagnosisError
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / "report.json"
+    try:
+        rep = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DiagnosisError(f"{path}: no such report (after= needs the report.json of an earlier diagnosis)") from None
+    except (OSError, ValueError) as exc:
+        raise DiagnosisError(f"{path}: not a readable diagnosis report ({exc})") from None
+    try:
+        verdict, ranking, base_model = rep["verdict"], rep["ranking"], rep["base_model"]
+        named, member = verdict["effect"], verdict.get("after_model") or verdict["effect"]
+    except (KeyError, TypeError):
+        raise DiagnosisError(f"{path}: not a trackenv diagnosis report (no verdict, ranking and base_model)") from None
+    if base_model.get("internal_resistance") != internal_resistance:
+        raise DiagnosisError(f"{path}: that diagnosis used the {base_model.get('internal_resistance')!r} internal "
+                             f"resistance as base, this one {internal_resistance!r}: use the same base model")
+    if named in (None, NONE, RECALIBRATE):
+        raise DiagnosisError(f"{path}: its verdict names no effect ({named!r}), so there is no fit to add to the base "
+                             "model")
+    entry = next((r for r in ranking if r.get("effect") == member), None)
+    if entry is None or not isinstance(entry.get("params"), dict):
+        raise DiagnosisError(f"{path}: the named fit {member!r} has no parameters in the ranking")
+    cands = {c.name: c for c in candidate_set(internal_resistance)}
+    cand = cands[effect_of(member)]
+    own = {sp.name: entry["params"].get(sp.name) for sp in cand.specs}
+    below = {k.split(".", 1)[1]: v for k, v in entry["params"].items() if k.startswith(RECALIBRATE + ".")}
+    values = dict(own) | {ON + k: v for k, v in below.items()}
+    bad = [k for k, v in values.items() if not (isinstance(v, (int, float)) and math.isfinite(v))]
+    if bad:
+        raise DiagnosisError(f"{path}: the named fit {member!r} lacks a finite value for {', '.join(bad)}")
+    if below:
+        cand = cand.standing_on(cands[RECALIBRATE])
+    window = entry["params"].get("encoder_window") or 0.0
+    earlier = []
+    for e in base_model.get("after") or []:
+        c = cands[e["effect"]]
+        vals = dict(e["params"])
+        if any(k.startswith(ON) for k in vals):
+            c = c.standing_on(cands[RECALIBRATE])
+        earlier.append(NamedFit(e["fit"], c, vals, e["report"], float(e.get("encoder_window") or 0.0)))
+    return (*earlier, NamedFit(member, cand, values, str(path), float(window)))
+
+
+_SENSOR_FAMILY = next(c for c in candidate_set() if c.name == "sensor_artifacts")

@@ -26,7 +26,7 @@ import numpy as np
 from ..compare import json_clean as _clean
 from ..params import is_integer, is_positive
 from .batch import FIT_SUBSTEP, BatchSimulator
-from .candidates import NONE, ON_BASE, RECALIBRATE, candidate_set, effect_of
+from .candidates import NONE, ON_BASE, RECALIBRATE, candidate_set, effect_of, named_fits_from_report
 from .data import DiagnosisError, TestData, load_tests
 from .fit import CandidateFit, fit_candidate, fit_plan, make_folds
 from .metrics import (
@@ -530,7 +530,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
              internal_resistance: str = "constant", candidates: list[str] | None = None, substep: float = FIT_SUBSTEP,
              seed: int = 0, rounds: int = 3, search_points: int = 16, polish_iters: int = 4, alpha: float = ALPHA, figures: bool = True,
              progress: bool = True, pad_s: float | None = None, cache: str | Path | None = None,
-             jacobian: str = "secant", vehicle: str | Path | None = None) -> Diagnosis:
+             jacobian: str = "secant", vehicle: str | Path | None = None,
+             after: str | Path | None = None) -> Diagnosis:
     """Diagnose the gap between the simulator and the field tests in ``folder`` (one sub-folder per test).
 
     Args:
@@ -549,6 +550,9 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         figures: draw the PNGs. progress: show a progress bar on stderr.
         vehicle: a vehicle id or YAML path used for every test instead of its ``meta.json`` vehicle (e.g. a
             vehicle calibrated on other runs, :mod:`trackenv.calibrate`).
+        after: the ``report.json`` (or its folder) of an earlier diagnosis: the fit it named, at its values
+            fitted on all the data, joins the base model (with the fits its own base carried), and the
+            candidates look for what remains. Its effect is not a candidate again (:class:`.candidates.NamedFit`).
 
     Raises:
         DiagnosisError: nothing usable in ``folder``, or a bad option.
@@ -563,6 +567,7 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         raise DiagnosisError(f"jacobian must be one of {', '.join(JACOBIANS)}, got {jacobian!r}")
     if internal_resistance not in ("constant", "viscous"):
         raise DiagnosisError(f"internal_resistance must be 'constant' or 'viscous', got {internal_resistance!r}")
+    named = named_fits_from_report(after, internal_resistance) if after is not None else ()
     data, excluded = load_tests(folder, tests)
     all_cands = candidate_set(internal_resistance)
     names = [c.name for c in all_cands]
@@ -571,12 +576,14 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         if unknown:
             raise DiagnosisError(f"unknown candidate(s) {', '.join(unknown)}; known: {', '.join(names)}")
         all_cands = [c for c in all_cands if c.name in candidates or c.name == NONE]
-    sim = BatchSimulator(data, internal_resistance, substep, pad_s=pad_s, vehicle=vehicle)
+    sim = BatchSimulator(data, internal_resistance, substep, pad_s=pad_s, vehicle=vehicle, named=named)
     deformable = [float(b.terrain.deformable) > 0.5 for b in sim.base]
     skipped = {}
     cands = []
+    in_base = {nf.effect: nf for nf in named}
     for c in all_cands:
-        why = c.applicable(deformable)
+        why = (f"already in the base model ({in_base[c.name].member}, named by {in_base[c.name].source})"
+               if c.name in in_base else c.applicable(deformable))
         if why:
             skipped[c.name] = why
         else:
@@ -667,6 +674,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
     confidence = rule["confidence"] * flag_penalty(flags)
     line = verdict_line(effect, confidence, shrink, shrink_ci, ins, ins_ci, reason, flags, rule.get("own_shrink"),
                         rule.get("gap_reference", NONE))
+    if named:  # what the verdict is conditional on comes first in its line
+        line = f"after {' + '.join(nf.member for nf in named)}: {line}"
     rounding = rounding_checks(sim, data, chosen_name, fits)
     rows = cell_table(data, base.full_pred, chosen.heldout_pred)
     cell_ci(data, rows, sq_base, sq_after, seed=seed)
@@ -677,7 +686,8 @@ def diagnose(folder: str | Path, out_dir: str | Path | None = None, *, tests: li
         "data_label": data_label(data),
         "base_model": {"internal_resistance": internal_resistance, "substep_s": substep,
                        "vehicle": str(vehicle) if vehicle else "each log's meta.json vehicle",
-                       "input_modes": sorted({t.drive_kind for t in data})},
+                       "input_modes": sorted({t.drive_kind for t in data}),
+                       "after": [nf.to_json() for nf in named]},
         "verdict": {
             "effect": effect, "confidence": confidence, "verdict_line": line, "flags": flags,
             "heldout_gap_shrink": shrink if effect != NONE else 0.0,

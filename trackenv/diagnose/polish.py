@@ -30,12 +30,11 @@ from __future__ import annotations
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..compare import POSE, stack_trees, wrap_angle
+from ..compare import POSE, wrap_angle
 from ..simulate import simulate_on_cores
 from .batch import predictions_at_log
 from .candidates import ON, Candidate
@@ -116,10 +115,8 @@ class _Problem:
         out = {}
         for bi, b in enumerate(sim.buckets):
             nb = len(b.tests)
-            base = stack_trees([sim.base[j] for j in b.tests])
-            base = jax.tree.map(lambda x: jnp.repeat(x, F, axis=-1) if eqx.is_inexact_array(x) else x, base)
+            base, ref = sim.stacked_base(b, F)
             v = {k: jnp.tile(x, nb) for k, x in vals.items()} | {k: np.tile(x, nb) for k, x in fixed.items()}
-            ref = {"b_int_constant": np.repeat(sim.b_int_constant[list(b.tests)], F)}
             params = cand.apply(base, v, ref)
             t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
             if cand.instrument_only:
@@ -128,7 +125,7 @@ class _Problem:
                 else:
                     ch0 = {k: np.repeat(x, F, axis=-1) for k, x in sim.base_channels(bi, b).items()}
                 ch = {k: jnp.asarray(x, params.dtype) for k, x in ch0.items()}
-                for eff in params.effects:
+                for eff in params.effects[-1:]:  # its own: the base's are in ``ch`` already
                     ch = eff.instruments(ch, t, params)
             else:
                 prof = b.profile(F, params.dtype)

@@ -20,6 +20,15 @@ PHASE_COLOR = {"idle": "#ffffff", "ramp": "#fde0c5", "cruise": "#e0f0e0", "turn"
                "coast": "#eeeeee"}
 
 
+def after_text(after: list) -> str:
+    """The sentence of report.md that names the fits an earlier diagnosis added to the base model ("" if none)."""
+    if not after:
+        return ""
+    fits = "; ".join(f"`{a['fit']}` (" + ", ".join(f"{k} = {v:.4g}" for k, v in a["params"].items()) + f", from {a['report']})"
+                     for a in after)
+    return f"The base model carries the fits earlier diagnoses named: {fits}. "
+
+
 def _plt():
     import matplotlib
 
@@ -135,6 +144,7 @@ def write_report(diag, out: Path, figures: bool = True) -> dict:
          f"Base model: {rep['base_model']['internal_resistance']} internal resistance; fits at a "
          f"{1e3 * rep['base_model']['substep_s']:g} ms substep; vehicle: {rep['base_model'].get('vehicle', 'the logs')}; "
          f"drive input: {', '.join(rep['base_model'].get('input_modes', ['voltage']))} mode. "
+         f"{after_text(rep['base_model'].get('after') or [])}"
          f"Wall time {rep['timing']['wall_s']:.0f} s.", "",
          "## Verdict", ""]
     L += [f"**{v['verdict_line']}**", "",
