@@ -971,6 +971,8 @@ def test_after_refuses_a_report_that_names_no_fit_or_another_base(tmp_path):
                                                                           "bulldozing_factor": 1.5}), "constant")
     with pytest.raises(DiagnosisError, match="no such report"):
         named_fits_from_report(tmp_path / "missing" / "report.json", "constant")
+    with pytest.raises(DiagnosisError, match="base_model.after"):
+        named_fits_from_report(_report_naming(tmp_path / "chain", after=[{"fit": "moon_dust"}]), "constant")
 
 
 def test_after_the_named_effect_the_diagnosis_finds_the_one_that_remains(tmp_path):

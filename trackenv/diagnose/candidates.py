@@ -347,15 +347,19 @@ def named_fits_from_report(path, internal_resistance: str) -> tuple[NamedFit, ..
         raise DiagnosisError(f"{path}: the named fit {member!r} lacks a finite value for {', '.join(bad)}")
     if below:
         cand = cand.standing_on(cands[RECALIBRATE])
-    window = entry["params"].get("encoder_window") or 0.0
     earlier = []
-    for e in base_model.get("after") or []:
-        c = cands[e["effect"]]
-        vals = dict(e["params"])
-        if any(k.startswith(ON) for k in vals):
-            c = c.standing_on(cands[RECALIBRATE])
-        earlier.append(NamedFit(e["fit"], c, vals, e["report"], float(e.get("encoder_window") or 0.0)))
-    return (*earlier, NamedFit(member, cand, values, str(path), float(window)))
+    try:
+        window = float(entry["params"].get("encoder_window") or 0.0)
+        for e in base_model.get("after") or []:
+            c = cands[e["effect"]]
+            vals = {k: float(v) for k, v in e["params"].items()}
+            if any(k.startswith(ON) for k in vals):
+                c = c.standing_on(cands[RECALIBRATE])
+            earlier.append(NamedFit(e["fit"], c, vals, e["report"], float(e.get("encoder_window") or 0.0)))
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise DiagnosisError(f"{path}: base_model.after or the encoder window of the named fit is not as a trackenv "
+                             "diagnosis writes it") from None
+    return (*earlier, NamedFit(member, cand, values, str(path), window))
 
 
 _SENSOR_FAMILY = next(c for c in candidate_set() if c.name == "sensor_artifacts")
