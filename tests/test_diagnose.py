@@ -764,6 +764,30 @@ def test_cli_bad_folder_exits_2(tmp_path, capsys):
     assert "no such folder" in capsys.readouterr().err
 
 
+def test_cli_passes_after_on_and_points_to_it_when_an_effect_is_named(tmp_path, capsys, monkeypatch):
+    """The command line hands ``--after`` to the diagnosis, and after a named effect says how to look further;
+    after ``none`` it does not (a stand-in diagnosis: this checks the command line, not the fits)."""
+    from types import SimpleNamespace
+
+    import trackenv.diagnose
+    from trackenv.cli import main
+
+    calls = []
+
+    def fake(folder, out, **kw):
+        calls.append(kw)
+        effect = "none" if kw["after"] else "slip_sinkage"
+        return SimpleNamespace(verdict={"effect": effect, "verdict_line": effect},
+                               report={"data_label": "SYNTHETIC", "gap_cells": [], "timing": {"wall_s": 1.0}})
+
+    monkeypatch.setattr(trackenv.diagnose, "diagnose", fake)
+    assert main(["diagnose", TWIN, "--out", str(tmp_path / "first")]) == 0
+    assert f"--after {tmp_path / 'first' / 'report.json'}" in capsys.readouterr().out
+    report = _report_naming(tmp_path / "first")
+    assert main(["diagnose", TWIN, "--out", str(tmp_path / "second"), "--after", str(report)]) == 0
+    assert calls[-1]["after"] == str(report) and "--after" not in capsys.readouterr().out
+
+
 # The withheld-effect check, small CI version (3 tests of at most 6 s, 8 search points, 1 cross-entropy round,
 # no polish). Threshold: at least 2 of these 3 blind cases (effects in forms the
 # candidate library does not have; labels withheld) get the right verdict, and the null case is not flagged.

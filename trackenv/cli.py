@@ -207,6 +207,9 @@ def cmd_diagnose(args) -> int:
         print(f"  gap in {c['test']} / {c['signal']} / {c['phase']}: NRMSE {100 * c['nrmse_before']:.1f}%, "
               f"bias {c['bias_before']:+.3g}")
     print(f"report: {Path(args.out) / 'report.md'} ({d.report['timing']['wall_s']:.0f} s)")
+    if v["effect"] not in ("none", None):
+        print(f"what remains once it is in the model: the same command with --after {Path(args.out) / 'report.json'} "
+              "and another --out")
     return 0
 
 
