@@ -193,9 +193,8 @@ def cmd_diagnose(args) -> int:
     if args.after is not None:
         from trackenv.diagnose.candidates import named_fits_from_report
 
-        named_fits_from_report(args.after, args.internal_resistance)  # readable, and names an effect
-        after = Path(args.after)
-        inputs.append(after if after.is_dir() else after.parent)  # --out must not overwrite the report it continues
+        named = named_fits_from_report(args.after, args.internal_resistance)  # readable, and names an effect
+        inputs.append(Path(named[-1].source).parent)  # --out must not overwrite the report it continues
     prepare_output_dir(args.out, "diagnose", force=args.force, inputs=inputs)
     d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
                  seed=args.seed, figures=not args.no_figures, progress=True, polish_iters=args.polish_iters,

@@ -285,10 +285,15 @@ def is_integer(x: Any) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
 
 
+def is_real(x: Any) -> bool:
+    """True for a finite Python or numpy number (not a bool)."""
+    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+            and bool(np.isfinite(x)))
+
+
 def is_positive(x: Any) -> bool:
     """True for a finite Python or numpy number > 0 (not a bool): a duration, a rate or a length."""
-    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
-            and bool(np.isfinite(x) and x > 0))
+    return is_real(x) and bool(x > 0)
 
 
 def _bound_text(lo, lo_strict, hi, hi_strict, scale: float = 1.0, unit: str = "") -> str:

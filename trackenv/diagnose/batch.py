@@ -253,14 +253,18 @@ class BatchSimulator:
         cols = np.concatenate([q * U + inv for q in range(len(b.tests))])
         return {k: v[:, cols] for k, v in ch.items()}
 
+    def channels_below(self, bi: int, b: Bucket, cand: Candidate, below: dict, S: int) -> dict:
+        """Raw channels (T, nb · S) that the instruments-only ``cand`` transforms: those of the candidate it stands
+        on at ``below`` {name: (S,)} (:meth:`channels_on`), or the base model's repeated ``S`` times."""
+        if cand.on is not None:
+            return self.channels_on(bi, b, cand.on, below)
+        return {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
+
     def _instrument_only(self, bi: int, b: Bucket, cand: Candidate, values: dict, S: int) -> dict:
         """An effect that only transforms instruments: apply it to the base trajectory (to the trajectory of
         the candidate it stands on, :meth:`channels_on`), no new simulation."""
         own, below = cand.split_values(values)
-        if cand.on is not None:
-            ch = self.channels_on(bi, b, cand.on, below)
-        else:
-            ch = {k: np.repeat(v, S, axis=-1) for k, v in self.base_channels(bi, b).items()}
+        ch = self.channels_below(bi, b, cand, below, S)
         params = self._params(b, dataclasses.replace(cand, on=None), own, S)
         t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
         for eff in params.effects[-1:]:  # its own: the base's (a named fit's window) are in ``ch`` already

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..params import is_integer, is_positive
+from ..params import is_integer, is_positive, is_real
 from .blind import NEAR_LIMIT
 from .candidates import NONE
 from .core import check_options, diagnose
@@ -177,13 +177,10 @@ def check_benchmark_options(*, n_cases: int, labels: list[str] | None = None, nu
     [0, 1], ``n_tests`` None or 1 to ``blind.MAX_TESTS``, ``t_max`` None or a positive duration [s]."""
     from .blind import MAX_TESTS
 
-    def fraction(x) -> bool:
-        return isinstance(x, (int, float, np.floating)) and not isinstance(x, bool) and 0.0 <= x <= 1.0
-
     if not labels and not (is_integer(n_cases) and n_cases >= 1):
         raise DiagnosisError(f"n_cases (the number of blind cases) must be an integer >= 1, got {n_cases!r}")
     for name, value in (("null_fraction", null_fraction), ("near_limit_fraction", near_limit_fraction)):
-        if not fraction(value):
+        if not (is_real(value) and 0.0 <= value <= 1.0):
             raise DiagnosisError(f"{name} must be a fraction in [0, 1], got {value!r}")
     if n_tests is not None and not (is_integer(n_tests) and 1 <= n_tests <= MAX_TESTS):
         raise DiagnosisError(f"n_tests (tests per case) must be an integer from 1 to {MAX_TESTS}, got {n_tests!r}")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..compare import json_clean as _clean
-from ..params import is_integer, is_positive
+from ..params import is_integer, is_positive, is_real
 from .batch import FIT_SUBSTEP, BatchSimulator
 from .candidates import NONE, ON_BASE, RECALIBRATE, candidate_set, effect_of, named_fits_from_report
 from .data import DiagnosisError, TestData, load_tests
@@ -513,7 +513,7 @@ def check_options(*, seed: int = 0, rounds: int = 3, search_points: int = 16, po
                                    ("polish_iters", polish_iters, 0, "an integer >= 0 (0: no polish)")):
         if not (is_integer(value) and value >= low):
             raise DiagnosisError(f"{name} must be {what}, got {value!r}")
-    if not (isinstance(alpha, (int, float, np.floating)) and not isinstance(alpha, bool) and 0.0 < alpha < 1.0):
+    if not (is_real(alpha) and 0.0 < alpha < 1.0):
         raise DiagnosisError(f"alpha (the rule's significance level) must lie strictly between 0 and 1, got {alpha!r}")
     try:
         check_substep(substep, MAX_SUBSTEP)

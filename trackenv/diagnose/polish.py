@@ -120,10 +120,7 @@ class _Problem:
             params = cand.apply(base, v, ref)
             t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
             if cand.instrument_only:
-                if cand.on is not None:
-                    ch0 = sim.channels_on(bi, b, cand.on, {k[len(ON):]: x for k, x in fixed.items()})
-                else:
-                    ch0 = {k: np.repeat(x, F, axis=-1) for k, x in sim.base_channels(bi, b).items()}
+                ch0 = sim.channels_below(bi, b, cand, {k[len(ON):]: x for k, x in fixed.items()}, F)
                 ch = {k: jnp.asarray(x, params.dtype) for k, x in ch0.items()}
                 for eff in params.effects[-1:]:  # its own: the base's are in ``ch`` already
                     ch = eff.instruments(ch, t, params)
