@@ -55,6 +55,23 @@ def test_unknown_config_key_names_file_and_key(tmp_path):
         drivers.load_config("ppo", "go_stop", "dry_sand", bad)
 
 
+def test_linear_learning_rate_schedule_falls_to_zero_over_the_run(tmp_path):
+    cfg = {"default": {"n_envs": 4, "n_timesteps": 128, "n_steps": 16, "batch_size": 32, "n_epochs": 1,
+                       "residual": 0.0, "learning_rate": "lin_0.001", "policy_kwargs": {"net_arch": [8]},
+                       "env_kwargs": {"max_time": 0.5}}}
+    res = drivers.train("go_stop", "dry_sand", "ppo", out_dir=tmp_path, progress_bar=False, tensorboard=False,
+                        config=cfg)
+    model = drivers.load_policy(res.model_path, "go_stop", "dry_sand", warn=False)
+    assert model.lr_schedule(1.0) == pytest.approx(1e-3) and model.lr_schedule(0.25) == pytest.approx(2.5e-4)
+    # the optimiser's rate at the last of the two updates, set after all 128 steps were collected: the end
+    assert model.policy.optimizer.param_groups[0]["lr"] == 0.0
+    bad = tmp_path / "bad.yaml"
+    for spec in ("lin_fast", "exp_0.001", "lin_-1"):
+        bad.write_text(yaml.safe_dump({"default": {"n_timesteps": 1000, "learning_rate": spec}}))
+        with pytest.raises(ConfigError, match=r"bad\.yaml.*learning_rate.*lin_<number>"):
+            drivers.load_config("ppo", "go_stop", "dry_sand", bad)
+
+
 def test_config_extends_another_and_overrides_key_by_key(tmp_path):
     f = tmp_path / "plain.yaml"
     f.write_text("extends: ppo.yaml\ndefault:\n  residual: 0.0\n  policy_kwargs: {log_std_init: -2.0}\n")

@@ -33,6 +33,8 @@ speed_error_weight  w_v >= 0 (default 0): a second shaping term, r - w_v (e_v / 
                     observation (the tasks that observe one: go-stop, J-turn, lane change; s_v its kernel
                     scale, 0.2 m/s). It makes standing still costly for a plain policy, for which the
                     cross-track penalty alone rewards not driving at all (train/README.md, "Plain PPO")
+learning_rate       a number, or ``lin_<value>`` (RL Zoo's linear schedule: from ``<value>`` at the start to 0 at
+                    ``n_timesteps``; a driver continued with ``--init`` starts the schedule again)
 any other key       a keyword of the algorithm's constructor (``learning_rate``, ``n_steps``,
                     ``batch_size``, ``gamma``, ``gae_lambda``, ``ent_coef``, ``clip_range``,
                     ``n_epochs``, ``buffer_size``, ``train_freq``, ...), checked against its signature
@@ -296,7 +298,14 @@ def _validate_values(cfg: dict, where: str) -> dict:
     bad_env = sorted(set(cfg["env_kwargs"]) & {"normalize_action", "autoreset_mode", "terrain", "task", "num_envs"})
     if bad_env:
         raise ConfigError(f"{where}: env_kwargs may not set {bad_env} (fixed by the trainer / command line)")
+    if isinstance(cfg.get("learning_rate"), str):
+        lin = linear_schedule_start(cfg["learning_rate"])
+        if lin is None:
+            raise ConfigError(f"{where}: 'learning_rate' must be a non-negative number or 'lin_<number>' "
+                              f"(a linear schedule to 0), got {cfg['learning_rate']!r}")
     for k in ("learning_rate", "gamma", "gae_lambda", "ent_coef", "clip_range", "tau", "vf_coef", "max_grad_norm"):
+        if k == "learning_rate" and isinstance(cfg.get(k), str):
+            continue
         if k in cfg and not (isinstance(cfg[k], (int, float)) and not isinstance(cfg[k], bool)
                              and np.isfinite(cfg[k]) and cfg[k] >= 0):
             if not (k == "ent_coef" and isinstance(cfg[k], str) and cfg[k].startswith("auto")):
@@ -314,9 +323,42 @@ def policy_kwargs(cfg: dict) -> dict:
     return pk
 
 
+def linear_schedule_start(spec: str) -> float | None:
+    """The start value of an RL-Zoo linear schedule ``"lin_<value>"``, or None if ``spec`` is not one."""
+    if not spec.startswith("lin_"):
+        return None
+    try:
+        value = float(spec[4:])
+    except ValueError:
+        return None
+    return value if np.isfinite(value) and value >= 0 else None
+
+
+class LinearSchedule:
+    """SB3 schedule falling linearly from ``start`` (progress remaining 1) to 0 (progress remaining 0).
+
+    RL Zoo's ``linear_schedule`` (``progress_remaining * initial_value``, the meaning of ``lin_`` in its
+    configs) as a picklable class. SB3's own ``LinearSchedule(start, 0, 1)`` computes
+    ``start + (1 - p) * (0 - start)``, which rounds differently, and a shipped driver is reproduced only by
+    the arithmetic it was trained with."""
+
+    def __init__(self, start: float):
+        self.start = float(start)
+
+    def __call__(self, progress_remaining: float) -> float:
+        return progress_remaining * self.start
+
+    def __repr__(self) -> str:
+        return f"lin_{self.start}"
+
+
 def algo_kwargs(cfg: dict) -> dict:
-    """The algorithm's constructor keywords of a config (everything but the META_KEYS)."""
-    return {k: v for k, v in cfg.items() if k not in META_KEYS}
+    """The algorithm's constructor keywords of a config (everything but the META_KEYS); a
+    ``learning_rate`` of ``lin_<value>`` becomes a :class:`LinearSchedule`."""
+    out = {k: v for k, v in cfg.items() if k not in META_KEYS}
+    if isinstance(out.get("learning_rate"), str):
+        out["learning_rate"] = LinearSchedule(linear_schedule_start(out["learning_rate"]))
+    return out
 
 
 def rollout_steps(cfg: dict, algo: str) -> int:
