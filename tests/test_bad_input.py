@@ -268,6 +268,10 @@ case("training config unknown key", "config",
      lambda t: (lambda p: (p.write_text(yaml.safe_dump({"default": {"n_timesteps": 1000, "learning_rat": 1e-3}})),
                            cli("train", "go_stop", "--config", p))[1])(t / "ppo_bad.yaml"),
      expect_error(Exception, "ppo_bad.yaml", "learning_rat", rc=2))
+case("training config learning-rate schedule that is not lin_<number>", "config",
+     lambda t: (lambda p: (p.write_text(yaml.safe_dump({"default": {"n_timesteps": 1000, "learning_rate": "lin_fast"}})),
+                           cli("train", "go_stop", "--config", p))[1])(t / "ppo_bad.yaml"),
+     expect_error(Exception, "ppo_bad.yaml", "'learning_rate'", "lin_<number>", "'lin_fast'", rc=2))
 
 # --- the simulate API ----------------------------------------------------------------------------
 def _simulate(**kw):
