@@ -298,13 +298,11 @@ def _validate_values(cfg: dict, where: str) -> dict:
     bad_env = sorted(set(cfg["env_kwargs"]) & {"normalize_action", "autoreset_mode", "terrain", "task", "num_envs"})
     if bad_env:
         raise ConfigError(f"{where}: env_kwargs may not set {bad_env} (fixed by the trainer / command line)")
-    if isinstance(cfg.get("learning_rate"), str):
-        lin = linear_schedule_start(cfg["learning_rate"])
-        if lin is None:
-            raise ConfigError(f"{where}: 'learning_rate' must be a non-negative number or 'lin_<number>' "
-                              f"(a linear schedule to 0), got {cfg['learning_rate']!r}")
     for k in ("learning_rate", "gamma", "gae_lambda", "ent_coef", "clip_range", "tau", "vf_coef", "max_grad_norm"):
         if k == "learning_rate" and isinstance(cfg.get(k), str):
+            if linear_schedule_start(cfg[k]) is None:
+                raise ConfigError(f"{where}: 'learning_rate' must be a non-negative number or 'lin_<number>' "
+                                  f"(a linear schedule to 0), got {cfg[k]!r}")
             continue
         if k in cfg and not (isinstance(cfg[k], (int, float)) and not isinstance(cfg[k], bool)
                              and np.isfinite(cfg[k]) and cfg[k] >= 0):
