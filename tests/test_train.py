@@ -206,6 +206,13 @@ def test_open_loop_energy_is_integral_of_v_i_and_logs_are_field_logs(tmp_path):
     e_log = float(np.sum(0.5 * (p0 + p1) * np.diff(t)))
     assert ep["energy"] == pytest.approx(e_log, rel=0.06)
     assert ep["peak_current"] == pytest.approx(np.max(np.abs([m["i_left"], m["i_right"]])), rel=1e-5)
+    # the open-loop go-stop ramps from 0 V up to its voltage, holds it and ramps down to 0: the first command
+    # and the steps between commands (from the log, whose last row repeats the last command) add up to twice
+    # the peak, on a few of the control steps
+    dv = np.diff(v[:-1], axis=0)
+    assert np.abs(v[0]) + np.abs(dv).sum(0) == pytest.approx(2 * np.abs(v).max(0), rel=1e-5)
+    assert 0 < np.count_nonzero(np.abs(dv).max(1) > 0.1) < len(dv) / 4
+    assert ep["voltage_step_rms"] == pytest.approx(float(np.sqrt(np.mean(dv**2))), rel=1e-5)
     assert ep["success"] and ep["completion_time"] == pytest.approx(ep["time"])
     # classical PI (tuned gains) succeeds on the go-stop
     assert res["methods"]["classical"]["summary"]["success_rate"] == 1.0

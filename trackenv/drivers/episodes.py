@@ -30,6 +30,8 @@ completion_time     s      time of success (NaN when the episode did not succeed
 energy              J      electrical energy drawn, integral of sum_k max(V_k i_k, 0) dt over the
                            1 ms substeps (regeneration not credited)
 peak_current        A      max |i| of both motors at the control-step samples (20 Hz)
+voltage_step_rms    V      RMS change of the commanded voltages from one control step to the next
+                           (both motors): how much the command chatters
 episode_return      -      the environment's return
 ==================  =====  =====================================================================
 
@@ -59,7 +61,8 @@ from .policy import Learned, check_observation_space, load_policy
 from .wrappers import EpisodeRecorder
 
 METHODS = ("learned", "open_loop", "classical")
-METRICS = ("success", "tracking_rmse", "completion_time", "energy", "peak_current", "episode_return")
+METRICS = ("success", "tracking_rmse", "completion_time", "energy", "peak_current", "voltage_step_rms",
+           "episode_return")
 
 
 def make_eval_env(task: str, terrain: str, n: int, *, randomize: Any = False, env_kwargs: dict | None = None):
@@ -96,7 +99,7 @@ def summarize(episodes: list[dict]) -> dict:
     """Success rate and the mean/std of every metric (completion time over successful episodes)."""
     out: dict[str, Any] = {"episodes": len(episodes)}
     out["success_rate"] = float(np.mean([e["success"] for e in episodes])) if episodes else math.nan
-    for m in ("tracking_rmse", "energy", "peak_current", "episode_return", "completion_time"):
+    for m in ("tracking_rmse", "energy", "peak_current", "voltage_step_rms", "episode_return", "completion_time"):
         vals = np.asarray([e[m] for e in episodes], np.float64)
         vals = vals[np.isfinite(vals)]
         out[m] = float(vals.mean()) if vals.size else math.nan
@@ -196,12 +199,14 @@ def format_table(result: dict) -> str:
              + f", {len(result['seeds'])} episodes, seeds {result['seeds'][0]}..{result['seeds'][-1]}"
              + (", randomised terrain" if result.get("randomize") else ", nominal terrain"),
              "",
-             f"| method | success | tracking RMSE [{unit}] | completion time [s] | energy [J] | peak current [A] | return |",
-             "|---|---|---|---|---|---|---|"]
+             f"| method | success | tracking RMSE [{unit}] | completion time [s] | energy [J] | peak current [A] "
+             "| voltage step RMS [V] | return |",
+             "|---|---|---|---|---|---|---|---|"]
     for m, r in result["methods"].items():
         s = r["summary"]
         lines.append(f"| {m} | {s['success_rate']:.0%} | {s['tracking_rmse']:.4f} | {_f(s['completion_time'], 2)} "
-                     f"| {s['energy']:.1f} | {s['peak_current']:.2f} | {s['episode_return']:.1f} |")
+                     f"| {s['energy']:.1f} | {s['peak_current']:.2f} | {_f(s['voltage_step_rms'], 2)} "
+                     f"| {s['episode_return']:.1f} |")
     return "\n".join(lines)
 
 

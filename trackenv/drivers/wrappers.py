@@ -155,7 +155,8 @@ class EpisodeRecorder:
     ``reset(seeds)`` -> observation; ``step(actions)`` -> observation (actions normalised, (N, 2));
     ``done`` (bool (N,)) marks the environments that have ended; :meth:`episodes` returns one dict per
     environment: the flags, ``tracking_rmse``, ``completion_time`` [s] (NaN unless it succeeded),
-    ``energy`` [J], ``peak_current`` [A], ``episode_return``, ``completion``, ``time`` [s], the
+    ``energy`` [J], ``peak_current`` [A], ``voltage_step_rms`` [V], ``episode_return``, ``completion``,
+    ``time`` [s], the
     ``trace`` (``t`` [s], ``v_left``/``v_right`` [V], ``i_left``/``i_right`` [A], ``x``/``y`` [m],
     ``heading`` [rad], ``u`` [m/s], ``yaw_rate`` [rad/s], ``speed_ideal`` [m/s]), the task's
     ``drawing`` and the randomised ``params`` when domain randomisation is on.
@@ -207,6 +208,9 @@ class EpisodeRecorder:
             tr = self.traces[k]
             f = self.final[k] or {m: info[m][k] for m in FINAL_KEYS}
             v = np.asarray(tr["v"]).reshape(-1, 2)
+            # RMS change of the commanded voltages from one control step to the next, both motors
+            dv = np.diff(v, axis=0)
+            voltage_step_rms = float(np.sqrt(np.mean(np.square(dv)))) if dv.size else 0.0
             v = np.vstack([v, v[-1:] if len(v) else np.zeros((1, 2))])  # hold the last action on the last sample
             i = np.asarray(tr["i"])
             omega = np.asarray(tr["omega"])
@@ -218,6 +222,7 @@ class EpisodeRecorder:
                 "tracking_rmse": float(f["tracking_rmse"]),
                 "completion_time": float(f["time"]) if bool(f["success"]) else math.nan,
                 "energy": float(f["energy"]), "peak_current": float(np.max(np.abs(i))),
+                "voltage_step_rms": voltage_step_rms,
                 "episode_return": float(f["episode_return"]), "completion": float(f["completion"]),
                 "time": float(f["time"]),
                 "trace": {"t": np.asarray(tr["t"]), "v_left": v[:, 0], "v_right": v[:, 1], "i_left": i[:, 0],
