@@ -376,6 +376,27 @@ def test_speed_error_penalty_makes_standing_still_costly():
                       config={"default": {"n_envs": 4, "n_steps": 8, "n_timesteps": 64, "speed_error_weight": 1.0}})
 
 
+def test_action_rate_penalty_prices_the_change_of_the_action_within_an_episode():
+    """``action_rate_weight``: the reward drops by w_a mean_k (a_k - a_k,prev)^2, nothing on an episode's first
+    step or while the action holds; a negative weight is a config error naming the key."""
+    w = 3.0
+    a1 = np.array([[0.2, 0.4], [0.3, 0.3]], np.float32)
+    a2 = np.array([[0.5, -0.2], [0.3, 0.3]], np.float32)
+    rewards = {}
+    for weight in (0.0, w):
+        venv, _, _ = drivers.make_vec_env("j_turn", "dry_sand", 2, {}, seed=1000, action_rate_weight=weight)
+        venv.reset()
+        rewards[weight] = [venv.step(a)[1] for a in (a1, a2, a2)]
+        venv.close()
+    first, change, hold = (r0 - rw for r0, rw in zip(rewards[0.0], rewards[w]))
+    np.testing.assert_allclose(first, 0.0, atol=1e-6)
+    np.testing.assert_allclose(change, w * np.mean((a2 - a1) ** 2, axis=1), rtol=1e-4, atol=1e-6)
+    assert change[0] > 0.5 and abs(change[1]) < 1e-6  # the second environment holds its action
+    np.testing.assert_allclose(hold, 0.0, atol=1e-6)
+    with pytest.raises(ConfigError, match="'action_rate_weight' must be a non-negative number"):
+        drivers.load_config("ppo", "go_stop", config={"default": {"n_timesteps": 64, "action_rate_weight": -1}})
+
+
 def test_imitation_warm_start_clones_the_classical_controller():
     """``imitate: n``: the policy's mean action is fitted to n steps of the PI's episodes, after which the
     plain policy alone reproduces the PI's voltages on the states of a fresh PI episode (mean squared error

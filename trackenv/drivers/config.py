@@ -33,6 +33,9 @@ speed_error_weight  w_v >= 0 (default 0): a second shaping term, r - w_v (e_v / 
                     observation (the tasks that observe one: go-stop, J-turn, lane change; s_v its kernel
                     scale, 0.2 m/s). It makes standing still costly for a plain policy, for which the
                     cross-track penalty alone rewards not driving at all (train/README.md, "Plain PPO")
+action_rate_weight  w_a >= 0 (default 0): a shaping term against a chattering command, r - w_a mean_k
+                    (a_k - a_k,prev)^2 on the policy's normalised action and the one before it in the
+                    episode (:class:`~trackenv.drivers.wrappers.ActionRatePenalty`)
 learning_rate       a number, or ``lin_<value>`` (RL Zoo's linear schedule: from ``<value>`` at the start to 0 at
                     ``n_timesteps``; a driver continued with ``--init`` starts the schedule again)
 any other key       a keyword of the algorithm's constructor (``learning_rate``, ``n_steps``,
@@ -73,7 +76,7 @@ ENV_NAME = ENV_NAMES  # task id -> env name
 TERRAINS = ("dry_sand", "asphalt")  # the shipped drivers' terrains; any configs/terrain id trains
 ALGOS = ("ppo", "sac")
 META_KEYS = ("n_envs", "n_timesteps", "policy", "policy_kwargs", "env_kwargs", "checkpoint_freq", "residual",
-             "error_weight", "guide", "guide_release_stop", "speed_error_weight", "imitate")
+             "error_weight", "guide", "guide_release_stop", "speed_error_weight", "action_rate_weight", "imitate")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -279,6 +282,7 @@ def _validate_values(cfg: dict, where: str) -> dict:
     if m > 0 and (cfg["residual"] > 0 or cfg["guide"] > 0):
         raise ConfigError(f"{where}: 'imitate' is a plain driver's warm start and needs 'residual: 0' and 'guide: 0'")
     _number(cfg, "speed_error_weight", 0.0, 1e3, where, "a non-negative number", upper_open=True)
+    _number(cfg, "action_rate_weight", 0.0, 1e3, where, "a non-negative number", upper_open=True)
     if "n_timesteps" not in cfg:
         raise ConfigError(f"{where}: missing key 'n_timesteps'")
     for k in ("n_envs", "n_timesteps", "checkpoint_freq"):

@@ -57,16 +57,18 @@ from .config import (
 )
 from .curves import LearningCurve, _BaseCallback, curve_figure, read_curve, write_curve
 from .policy import load_policy
-from .wrappers import ErrorPenalty, GuideSchedule, ResidualVecEnv, StepTimer
+from .wrappers import ActionRatePenalty, ErrorPenalty, GuideSchedule, ResidualVecEnv, StepTimer
 
 
 def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None = None, seed: int | None = None,
-                 residual: dict | None = None, error_weight: float = 0.0, speed_error_weight: float = 0.0):
+                 residual: dict | None = None, error_weight: float = 0.0, speed_error_weight: float = 0.0,
+                 action_rate_weight: float = 0.0):
     """The SB3 training env: ``SB3VecEnv`` (normalised actions) in a step timer and ``VecMonitor``;
     with ``residual`` (``{"scale": r, "gains": {...}}``, optionally ``"classical_weight"`` and ``"release_stop"``)
     the policy's action is added to the classical controller's (:class:`~trackenv.drivers.wrappers.ResidualVecEnv`);
     with ``error_weight`` > 0 the reward is shaped on the task's primary tracking error, with
-    ``speed_error_weight`` > 0 also on its speed error (:class:`~trackenv.drivers.wrappers.ErrorPenalty`).
+    ``speed_error_weight`` > 0 also on its speed error (:class:`~trackenv.drivers.wrappers.ErrorPenalty`), with
+    ``action_rate_weight`` > 0 on the change of the policy's action (:class:`~trackenv.drivers.wrappers.ActionRatePenalty`).
     Returns the env, the step timer and the ``ResidualVecEnv`` (None without ``residual``)."""
     from stable_baselines3.common.vec_env import VecMonitor  # noqa: PLC0415
 
@@ -90,6 +92,8 @@ def make_vec_env(task: str, terrain: str, n_envs: int, env_kwargs: dict | None =
                               f"(observations: {', '.join(venv.venv.obs_names)})")
         mon = ErrorPenalty(mon, venv.venv.obs_names.index("speed_error"), cls.kernel_scales["speed_error"],
                            speed_error_weight)
+    if action_rate_weight > 0:
+        mon = ActionRatePenalty(mon, action_rate_weight)
     if seed is not None:
         mon.seed(int(seed))
     return mon, timer, (inner if residual else None)
@@ -285,7 +289,7 @@ def train(task: str, terrain: str = "dry_sand", algo: str = "ppo", *, config: st
         driver_meta["imitate"] = {"steps": cfg["imitate"], "gains": gains}
         residual = {"scale": 1.0, "gains": gains, "classical_weight": 0.0}
     venv, timer, guided = make_vec_env(task, terrain, cfg["n_envs"], cfg["env_kwargs"], seed, residual,
-                                       cfg["error_weight"], cfg["speed_error_weight"])
+                                       cfg["error_weight"], cfg["speed_error_weight"], cfg["action_rate_weight"])
     guide_steps = round(cfg["guide"] * cfg["n_timesteps"]) if cfg["guide"] > 0 else None
     callbacks = [_GuideCallback(GuideSchedule(guided, guide_steps))] if guide_steps else []
     tb, progress_bar = _optional_outputs(run, tensorboard, progress_bar)

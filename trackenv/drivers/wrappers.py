@@ -6,7 +6,8 @@ same-step autoreset is the jitted core's, :func:`trackenv.envs.core.step_autores
 - :class:`StepTimer`: wall time spent stepping and resetting the environment [s];
 - :class:`ResidualVecEnv`: the applied action is the PI controller's (times a weight, which
   :class:`GuideSchedule` lowers to 0 for a plain driver's curriculum) plus a scaled policy action;
-- :class:`ErrorPenalty`: training reward shaping on the task's primary tracking error.
+- :class:`ErrorPenalty`: training reward shaping on the task's primary tracking error;
+- :class:`ActionRatePenalty`: training reward shaping against a command that chatters.
 
 For evaluation, :class:`EpisodeRecorder` wraps a :class:`~trackenv.envs.vector.TrackVectorEnv` without
 autoreset and keeps each environment's trace and final metrics up to its first end (the episode
@@ -142,6 +143,34 @@ class ErrorPenalty(_VecEnvWrapper):
             if term is not None:
                 e[i] = float(term[self.index])
         return obs, (rew - self.weight * np.square(e / self.scale)).astype(np.float32), dones, infos
+
+
+class ActionRatePenalty(_VecEnvWrapper):
+    """Training reward shaping against a chattering command: r - weight * mean_k (a_k - a_k,prev)^2, with a the
+    policy's action (normalised: units of the voltage limit, both motors) and a_prev the one before it in the
+    same episode; an episode's first step is not penalised. For a plain driver whose guide has faded, a is
+    the applied voltage over the limit: the penalty prices the evaluation's ``voltage_step_rms``."""
+
+    def __init__(self, venv, weight: float):
+        super().__init__(venv)
+        self.weight = float(weight)
+        self._prev = np.zeros((self.num_envs, int(np.prod(self.action_space.shape))))
+        self._first = np.ones(self.num_envs, bool)
+        self._actions = self._prev
+
+    def reset(self):
+        self._first[:] = True
+        return self.venv.reset()
+
+    def step_async(self, actions):
+        self._actions = np.clip(np.asarray(actions, np.float64).reshape(self.num_envs, -1), -1.0, 1.0)
+        self.venv.step_async(actions)
+
+    def step_wait(self):
+        obs, rew, dones, infos = self.venv.step_wait()
+        rate = np.where(self._first, 0.0, np.mean(np.square(self._actions - self._prev), axis=1))
+        self._prev, self._first = self._actions, np.asarray(dones, bool).copy()
+        return obs, (rew - self.weight * rate).astype(np.float32), dones, infos
 
 
 FINAL_KEYS = ("success", "off_course", "diverged", "timeout", "time", "tracking_rmse", "energy", "episode_return",
