@@ -467,8 +467,7 @@ def plain_md(results):
         return []
     lines = ["", "## Plain drivers (no classical part) against the residual drivers", "",
              "Each `plain/` driver's action is the two voltages alone (trained with a guided curriculum, "
-             "`configs/train/ppo_plain.yaml`; the J-turn on sand then with a polish stage, "
-             "`configs/train/ppo_plain_polish.yaml`); the residual driver of the same task and terrain adds its action to "
+             "`configs/train/ppo_plain.yaml`); the residual driver of the same task and terrain adds its action to "
              "the PI's. Nominal terrain, 4 episodes; cells: success, tracking RMSE. *Beats* as in the effects "
              "section: a higher success rate, or the same and a lower tracking RMSE.", "",
              "| task, terrain | plain | residual | PI | open loop | plain beats PI | plain beats open loop |",
