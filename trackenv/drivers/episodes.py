@@ -99,7 +99,7 @@ def summarize(episodes: list[dict]) -> dict:
     """Success rate and the mean/std of every metric (completion time over successful episodes)."""
     out: dict[str, Any] = {"episodes": len(episodes)}
     out["success_rate"] = float(np.mean([e["success"] for e in episodes])) if episodes else math.nan
-    for m in ("tracking_rmse", "energy", "peak_current", "voltage_step_rms", "episode_return", "completion_time"):
+    for m in (m for m in METRICS if m != "success"):  # success: its rate, above
         vals = np.asarray([e[m] for e in episodes], np.float64)
         vals = vals[np.isfinite(vals)]
         out[m] = float(vals.mean()) if vals.size else math.nan
