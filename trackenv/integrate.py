@@ -8,8 +8,12 @@ with lambda = 0 *is* classical RK4).
 
 The shear decay rate lambda = |V_t|/z* depends on the sprocket speed. It is frozen over each substep at
 the belt speed predicted for the substep's midpoint (omega + h/2 domega/dt), which keeps the frozen-rate
-error second order while a voltage ramp changes V_t; z*, z-tilde and the leading edge are taken at the
-start of the substep. The rates of the motor circuit are constant and computed once per call.
+error second order while a voltage ramp changes V_t; z* and the leading edge are taken at the start of
+the substep. z-tilde* (3.31) is not: when the steering reverses, z-bar sweeps along the track within a few
+milliseconds and each element it passes has its j_x reset (the rate |V_t|/z-tilde* is singular there), so
+j_x's rate is |V_t| times the mean of 1/max(z-tilde*, Delta Z) over the substep, integrated in closed form
+with v and r linear in time (:func:`trackenv.physics.contact.mean_inverse_z_tilde`). The rates of the motor
+circuit are constant and computed once per call.
 
 Reference: S. M. Cox, P. C. Matthews, "Exponential time differencing for stiff systems",
 J. Comput. Phys. 176 (2002) 430-455; phi-function form after Hochbruck & Ostermann, Acta Numerica 2010.
@@ -163,8 +167,16 @@ def etdrk4_substep(
         state = _with_omega(state, omega3[0])
     ev = evaluate(state, volts3[0], params)
     omega_mid = state.omega + 0.5 * h * ev.drive.omega if omega3 is None else omega3[1]
-    _, lam_z, lam_x = decay_rates(params, ev.kin, ev.kin.belt_radius * omega_mid)
+    speed = ev.kin.belt_radius * omega_mid  # V_t at the substep's midpoint [m/s]
+    _, lam_z, _ = decay_rates(params, ev.kin, speed)
     lam_w, lam_vel = jax.lax.stop_gradient(diagonal_damping(params, state, ev))
+    # j_x's rate: |V_t| times the mean of 1/max(z-tilde*, Delta Z) over the substep, with v and r linear between
+    # the start and a prediction at its end (Euler, damped by the diagonal rates: the (1,1) Pade form of
+    # exponential Euler), so that z-bar sweeping past an element within the substep resets that element's j_x
+    # (3.32) as the continuous model does.
+    vel_end = state.vel + h * ev.drive.vel / (1.0 + 0.5 * h * lam_vel)
+    lam_x = jnp.abs(speed)[:, None] * contact.mean_inverse_z_tilde(params.vehicle, ev.kin, vel_end, state.vel,
+                                                                   state.vel.ndim - 1)
     c = _tree_coeffs(state, current, etd_coeffs(lam_z, h), etd_coeffs(lam_x, h),
                      etd_coeffs(lam_w, h), etd_coeffs(lam_vel, h), h)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from ..params import Terrain, Vehicle
 from . import terramechanics as tm
@@ -58,11 +58,7 @@ def kinematics(
 
     # Leading edge: where belt material enters the contact patch (§3.4.2.2). On a wheeled side every
     # patch has its own leading edge, all at the same end (docs/model.md §1.1).
-    front = jnp.where(
-        belt_speed > LEADING_EDGE_SPEED,
-        True,
-        jnp.where(belt_speed < -LEADING_EDGE_SPEED, False, ground_speed >= 0.0),
-    )  # (2, *b)
+    front = leading_edge_is_front(belt_speed, ground_speed)  # (2, *b)
     half = 0.5 * vehicle.contact_length
     local = patch_x(vehicle, nb)  # (1, N, *b), x relative to the point's patch centre
     z_from_front = half - local  # (1, N, *b), from the front edge of the point's patch
@@ -71,18 +67,102 @@ def kinematics(
 
     # z-bar: where the lateral velocity changes sign along each patch (3.29), (3.30), from the lateral
     # velocities at the patch's front and rear edges.
-    ahead, behind = patch_edges(vehicle, nb)  # m, (1, P, *b); L/2 for a track
-    vy_front = v + r * ahead
-    vy_rear = v - r * behind
-    first = front[:, None]  # (2, 1, *b): the leading edge is at the same end of every patch
-    v_first = jnp.where(first, vy_front, vy_rear)  # (2, P, *b)
-    v_last = jnp.where(first, vy_rear, vy_front)
+    v_first, v_last = edge_lateral_velocities(vehicle, v, r, front, nb)  # (2, P, *b)
     changes_sign = v_first * v_last < 0.0
     denom = jnp.where(changes_sign, v_first - v_last, 1.0)
     z_bar = per_point(vehicle, jnp.where(changes_sign, v_first / denom * vehicle.contact_length, jnp.inf))
     past = z_star >= z_bar
     z_tilde = jnp.where(past, z_star - z_bar, z_star)  # (3.31)
     return Kinematics(rb, belt_speed, ground_speed, slip, vy, z_star, z_tilde, x, y, contact_area(vehicle, nb))
+
+
+def leading_edge_is_front(belt_speed: Float[Array, " 2 *b"], ground_speed: Float[Array, " 2 *b"]) -> Bool[Array, " 2 *b"]:
+    """(2, *b) True where belt material enters each track's contact patches at their front end (§3.4.2.2):
+    V_t > Delta V_z; at |V_t| <= Delta V_z the leading edge follows the ground speed."""
+    return jnp.where(
+        belt_speed > LEADING_EDGE_SPEED,
+        True,
+        jnp.where(belt_speed < -LEADING_EDGE_SPEED, False, ground_speed >= 0.0),
+    )
+
+
+def edge_lateral_velocities(
+    vehicle: Vehicle, v: Float[Array, " *b"], r: Float[Array, " *b"], front: Bool[Array, " 2 *b"], nb: int
+) -> tuple[Float[Array, " 2 P *b"], Float[Array, " 2 P *b"]]:
+    """Lateral velocities [m/s] at each patch's leading ("first") and other ("last") edge, (2, P, *b) each."""
+    ahead, behind = patch_edges(vehicle, nb)  # m, (1, P, *b); L/2 for a track
+    vy_front = v + r * ahead
+    vy_rear = v - r * behind
+    first = front[:, None]  # (2, 1, *b): the leading edge is at the same end of every patch
+    return jnp.where(first, vy_front, vy_rear), jnp.where(first, vy_rear, vy_front)
+
+
+# m/s: floor of the speeds the substep mean divides by, far below any physical one; small enough to be exact,
+# large enough that gradients through the unselected branches stay finite in float32.
+_TINY_SPEED = 1e-9
+
+
+def _log_ramp(w: Float[Array, " ..."], eps: Float[Array, " ..."]) -> Float[Array, " ..."]:
+    """An antiderivative of 1/max(|w|, eps): w/eps for |w| <= eps, sign(w) (1 + ln(|w|/eps)) beyond."""
+    a = jnp.abs(w)
+    return jnp.where(a <= eps, w / eps, jnp.sign(w) * (1.0 + jnp.log(jnp.maximum(a, eps) / eps)))
+
+
+def mean_inverse_z_tilde(
+    vehicle: Vehicle, kin: Kinematics, vel_end: Float[Array, " 3 *b"], vel_start: Float[Array, " 3 *b"], nb: int
+) -> Float[Array, " 2 N *b"]:
+    """Mean over a substep of 1/max(z-tilde*, Delta Z) [1/m] (3.31), with v and r linear in time between
+    ``vel_start`` and ``vel_end`` and the leading edge of ``kin`` (the substep's start).
+
+    Past z-bar, z-tilde* = z* - z-bar is the distance to where v_y changes sign, |v_y,i|/|r|, so
+    1/max(z-tilde*, Delta Z) = min(|r/v_y,i|, 1/Delta Z): singular (up to the floor) where the element's own
+    v_y,i changes sign while it is past z-bar. Short of z-bar it is 1/z*. An element is past z-bar while v_y,i
+    and the leading edge's lateral velocity have opposite signs; both are linear in time, so each changes
+    sign at most once, and the substep falls into at most three pieces on which the element's side is
+    constant. On a piece past z-bar where |v_y,i| changes by more than 20 %, r/v_y = beta + alpha/v_y
+    (beta = dr/dv_y, alpha = r where v_y = 0) is integrated in closed form (:func:`_log_ramp`, floored at
+    |alpha| Delta Z); elsewhere by the midpoint rule. A fixed step that samples z-tilde* at the substep's
+    start instead misses the reset of j_x (3.32) whenever z-bar sweeps past an element within one substep.
+    """
+    front = leading_edge_is_front(kin.belt_speed, kin.ground_speed)
+    v0, r0, v1, r1 = vel_start[1], vel_start[2], vel_end[1], vel_end[2]
+    w0, w1 = v0 + r0 * kin.x, v1 + r1 * kin.x  # v_y,i at both ends, (1, N, *b)
+    f0 = per_point(vehicle, edge_lateral_velocities(vehicle, v0, r0, front, nb)[0])  # leading edge's, (2, N, *b)
+    f1 = per_point(vehicle, edge_lateral_velocities(vehicle, v1, r1, front, nb)[0])
+    dw, dr = w1 - w0, r1 - r0  # changes over the substep [m/s], [rad/s]
+    per_dw = 1.0 / jnp.where(jnp.abs(dw) > _TINY_SPEED, dw, 1.0)
+    beta = dr * per_dw  # r = alpha + beta v_y,i along the substep
+    alpha = r0 - beta * w0  # [rad/s]
+    eps = jnp.maximum(jnp.abs(alpha) * MIN_Z_STAR, _TINY_SPEED)  # |v_y| below which z-tilde* is at its floor [m/s]
+
+    def crossing(a, b):  # where a linear a -> b changes sign, as a fraction of the substep; 1 if it does not
+        changes = a * b < 0.0
+        return changes, jnp.where(changes, a / jnp.where(changes, a - b, 1.0), 1.0)
+
+    def inverse(s):  # 1/max(z-tilde*, Delta Z) past z-bar at the fraction s of the substep [1/m]
+        r = jnp.abs(r0 + dr * s)
+        return r / jnp.maximum(jnp.abs(w0 + dw * s), jnp.maximum(r * MIN_Z_STAR, _TINY_SPEED))
+
+    w_changes, sa = crossing(w0, w1)
+    f_changes, sb = crossing(f0, f1)
+    g1 = _log_ramp(w1, eps)
+    ga = jnp.where(w_changes, 0.0, g1)  # G where v_y,i = 0, or at the end
+    gb = jnp.where(f_changes, _log_ramp(w0 + dw * sb, eps), g1)  # G where the leading edge's v_y changes sign
+    a_first = sa <= sb
+    cuts = (jnp.zeros_like(sb), jnp.minimum(sa, sb), jnp.maximum(sa, sb), jnp.ones_like(sb))
+    gs = (_log_ramp(w0, eps), jnp.where(a_first, ga, gb), jnp.where(a_first, gb, ga), g1)
+    inv_z = 1.0 / jnp.maximum(kin.z_star, MIN_Z_STAR)
+    total = 0.0
+    for lo, hi, g_lo, g_hi in zip(cuts[:-1], cuts[1:], gs[:-1], gs[1:], strict=True):
+        mid = 0.5 * (lo + hi)
+        w_lo, w_mid, w_hi = w0 + dw * lo, w0 + dw * mid, w0 + dw * hi
+        past = w_mid * (f0 + (f1 - f0) * mid) < 0.0
+        near_zero = jnp.minimum(jnp.abs(w_lo), jnp.abs(w_hi)) < 0.8 * jnp.maximum(jnp.abs(w_lo), jnp.abs(w_hi))
+        sign = jnp.sign((r0 + dr * mid) * w_mid)
+        closed = sign * (beta * (hi - lo) + alpha * jnp.sign(w_mid) * (g_hi - g_lo) * per_dw)
+        midpoint = (hi - lo) * inverse(mid)
+        total = total + jnp.where(past, jnp.where(near_zero, closed, midpoint), (hi - lo) * inv_z)
+    return total
 
 
 def shear_decay_rates(
