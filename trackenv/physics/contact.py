@@ -68,9 +68,8 @@ def kinematics(
     # z-bar: where the lateral velocity changes sign along each patch (3.29), (3.30), from the lateral
     # velocities at the patch's front and rear edges.
     v_first, v_last = edge_lateral_velocities(vehicle, v, r, front, nb)  # (2, P, *b)
-    changes_sign = v_first * v_last < 0.0
-    denom = jnp.where(changes_sign, v_first - v_last, 1.0)
-    z_bar = per_point(vehicle, jnp.where(changes_sign, v_first / denom * vehicle.contact_length, jnp.inf))
+    changes_sign, fraction = _sign_change(v_first, v_last)
+    z_bar = per_point(vehicle, jnp.where(changes_sign, fraction * vehicle.contact_length, jnp.inf))
     past = z_star >= z_bar
     z_tilde = jnp.where(past, z_star - z_bar, z_star)  # (3.31)
     return Kinematics(rb, belt_speed, ground_speed, slip, vy, z_star, z_tilde, x, y, contact_area(vehicle, nb))
@@ -95,6 +94,13 @@ def edge_lateral_velocities(
     vy_rear = v - r * behind
     first = front[:, None]  # (2, 1, *b): the leading edge is at the same end of every patch
     return jnp.where(first, vy_front, vy_rear), jnp.where(first, vy_rear, vy_front)
+
+
+def _sign_change(a: Float[Array, " ..."], b: Float[Array, " ..."]) -> tuple[Bool[Array, " ..."], Float[Array, " ..."]]:
+    """Where a linear a -> b changes sign: the flag, and the fraction a/(a - b) of the way from a to b
+    (1 where it does not change sign)."""
+    changes = a * b < 0.0
+    return changes, jnp.where(changes, a / jnp.where(changes, a - b, 1.0), 1.0)
 
 
 # m/s: floor of the speeds the substep mean divides by, far below any physical one; small enough to be exact,
@@ -130,38 +136,38 @@ def mean_inverse_z_tilde(
     f0 = per_point(vehicle, edge_lateral_velocities(vehicle, v0, r0, front, nb)[0])  # leading edge's, (2, N, *b)
     f1 = per_point(vehicle, edge_lateral_velocities(vehicle, v1, r1, front, nb)[0])
     dw, dr = w1 - w0, r1 - r0  # changes over the substep [m/s], [rad/s]
-    per_dw = 1.0 / jnp.where(jnp.abs(dw) > _TINY_SPEED, dw, 1.0)
-    beta = dr * per_dw  # r = alpha + beta v_y,i along the substep
+    per = jnp.where(jnp.abs(dw) > _TINY_SPEED, dw, 1.0)  # dw as a divisor (an unchanging v_y,i takes the midpoint rule)
+    beta = dr / per  # r = alpha + beta v_y,i along the substep
     alpha = r0 - beta * w0  # [rad/s]
     eps = jnp.maximum(jnp.abs(alpha) * MIN_Z_STAR, _TINY_SPEED)  # |v_y| below which z-tilde* is at its floor [m/s]
 
-    def crossing(a, b):  # where a linear a -> b changes sign, as a fraction of the substep; 1 if it does not
-        changes = a * b < 0.0
-        return changes, jnp.where(changes, a / jnp.where(changes, a - b, 1.0), 1.0)
-
-    def inverse(s):  # 1/max(z-tilde*, Delta Z) past z-bar at the fraction s of the substep [1/m]
-        r = jnp.abs(r0 + dr * s)
-        return r / jnp.maximum(jnp.abs(w0 + dw * s), jnp.maximum(r * MIN_Z_STAR, _TINY_SPEED))
-
-    w_changes, sa = crossing(w0, w1)
-    f_changes, sb = crossing(f0, f1)
+    w_changes, sa = _sign_change(w0, w1)
+    f_changes, sb = _sign_change(f0, f1)
     g1 = _log_ramp(w1, eps)
     ga = jnp.where(w_changes, 0.0, g1)  # G where v_y,i = 0, or at the end
     gb = jnp.where(f_changes, _log_ramp(w0 + dw * sb, eps), g1)  # G where the leading edge's v_y changes sign
     a_first = sa <= sb
     cuts = (jnp.zeros_like(sb), jnp.minimum(sa, sb), jnp.maximum(sa, sb), jnp.ones_like(sb))
     gs = (_log_ramp(w0, eps), jnp.where(a_first, ga, gb), jnp.where(a_first, gb, ga), g1)
-    inv_z = 1.0 / jnp.maximum(kin.z_star, MIN_Z_STAR)
+    z_star = jnp.maximum(kin.z_star, MIN_Z_STAR)
+    # Each piece adds one quotient of a selected numerator and a selected denominator, so that the selections
+    # end in a division: XLA copies cheap element-wise work into every kernel that reads its result, but not a
+    # division. Selecting among finished quotients instead had the substep's stages each recompute the
+    # selections: 1.3-1.6x per substep (docs/performance.md).
     total = 0.0
     for lo, hi, g_lo, g_hi in zip(cuts[:-1], cuts[1:], gs[:-1], gs[1:], strict=True):
-        mid = 0.5 * (lo + hi)
+        length, mid = hi - lo, 0.5 * (lo + hi)
         w_lo, w_mid, w_hi = w0 + dw * lo, w0 + dw * mid, w0 + dw * hi
+        r_mid = r0 + dr * mid
         past = w_mid * (f0 + (f1 - f0) * mid) < 0.0
         near_zero = jnp.minimum(jnp.abs(w_lo), jnp.abs(w_hi)) < 0.8 * jnp.maximum(jnp.abs(w_lo), jnp.abs(w_hi))
-        sign = jnp.sign((r0 + dr * mid) * w_mid)
-        closed = sign * (beta * (hi - lo) + alpha * jnp.sign(w_mid) * (g_hi - g_lo) * per_dw)
-        midpoint = (hi - lo) * inverse(mid)
-        total = total + jnp.where(past, jnp.where(near_zero, closed, midpoint), (hi - lo) * inv_z)
+        # closed form: sign(r v_y) (beta (hi - lo) + alpha sign(v_y) (G(hi) - G(lo)) / dw)
+        closed = jnp.sign(r_mid * w_mid) * (beta * length * per + alpha * jnp.sign(w_mid) * (g_hi - g_lo))
+        # midpoint rule: (hi - lo) |r| / max(|v_y,i|, |r| Delta Z)
+        floor = jnp.maximum(jnp.abs(w_mid), jnp.maximum(jnp.abs(r_mid) * MIN_Z_STAR, _TINY_SPEED))
+        numerator = jnp.where(past, jnp.where(near_zero, closed, length * jnp.abs(r_mid)), length)
+        denominator = jnp.where(past, jnp.where(near_zero, per, floor), z_star)  # short of z-bar: (hi - lo)/z*
+        total = total + numerator / denominator
     return total
 
 
