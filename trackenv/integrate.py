@@ -32,7 +32,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .params import Params
 from .physics import contact
-from .physics.model import Evaluation, State, decay_rates, evaluate
+from .physics.model import Evaluation, State, evaluate
 from .physics.motor import current_decay_rate, resistance_slope
 from .physics.sums import contact_sum, divide_by_parameter
 
@@ -168,7 +168,7 @@ def etdrk4_substep(
     ev = evaluate(state, volts3[0], params)
     omega_mid = state.omega + 0.5 * h * ev.drive.omega if omega3 is None else omega3[1]
     speed = ev.kin.belt_radius * omega_mid  # V_t at the substep's midpoint [m/s]
-    _, lam_z, _ = decay_rates(params, ev.kin, speed)
+    lam_z = contact.longitudinal_decay_rate(speed, ev.kin)  # (3.14), at the midpoint belt speed
     lam_w, lam_vel = jax.lax.stop_gradient(diagonal_damping(params, state, ev))
     # j_x's rate: |V_t| times the mean of 1/max(z-tilde*, Delta Z) over the substep, with v and r linear between
     # the start and a prediction at its end (Euler, damped by the diagonal rates: the (1,1) Pade form of

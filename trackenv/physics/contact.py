@@ -149,7 +149,7 @@ def mean_inverse_z_tilde(
     a_first = sa <= sb
     cuts = (jnp.zeros_like(sb), jnp.minimum(sa, sb), jnp.maximum(sa, sb), jnp.ones_like(sb))
     gs = (_log_ramp(w0, eps), jnp.where(a_first, ga, gb), jnp.where(a_first, gb, ga), g1)
-    z_star = jnp.maximum(kin.z_star, MIN_Z_STAR)
+    z_star = floored_z_star(kin)
     # Each piece adds one quotient of a selected numerator and a selected denominator, so that the selections
     # end in a division: XLA copies cheap element-wise work into every kernel that reads its result, but not a
     # division. Selecting among finished quotients instead had the substep's stages each recompute the
@@ -171,13 +171,25 @@ def mean_inverse_z_tilde(
     return total
 
 
+def floored_z_star(kin: Kinematics) -> Float[Array, " 2 N *b"]:
+    """max(z*, Delta Z) [m]: each element's distance from the leading edge, floored (3.14)."""
+    return jnp.maximum(kin.z_star, MIN_Z_STAR)
+
+
+def longitudinal_decay_rate(belt_speed: Float[Array, " 2 *b"], kin: Kinematics) -> Float[Array, " 2 N *b"]:
+    """Linear decay rate |V_t|/max(z*, Delta Z) of j_z (3.14) [1/s], (2, N, *b)."""
+    return jnp.abs(belt_speed)[:, None] / floored_z_star(kin)
+
+
 def shear_decay_rates(
     belt_speed: Float[Array, " 2 *b"],
     kin: Kinematics,
 ) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
-    """Linear decay rates |V_t|/max(z*, Delta Z) of j_z (3.14) and j_x (3.32) [1/s], each (2, N, *b)."""
-    speed = jnp.abs(belt_speed)[:, None]
-    return speed / jnp.maximum(kin.z_star, MIN_Z_STAR), speed / jnp.maximum(kin.z_tilde, MIN_Z_STAR)
+    """Linear decay rates |V_t|/max(z*, Delta Z) of j_z (3.14) and |V_t|/max(z-tilde*, Delta Z) of j_x (3.32)
+    [1/s], each (2, N, *b), at one instant (the integrator takes j_x's as a substep mean instead:
+    :func:`mean_inverse_z_tilde`)."""
+    return (longitudinal_decay_rate(belt_speed, kin),
+            jnp.abs(belt_speed)[:, None] / jnp.maximum(kin.z_tilde, MIN_Z_STAR))
 
 
 def shear_drive(kin: Kinematics) -> tuple[Float[Array, " 2 N *b"], Float[Array, " 2 N *b"]]:
