@@ -757,6 +757,21 @@ def test_single_test_without_controls_says_so(tmp_path):
     assert rep["method"]["folds"][0]["kind"] == "forward"  # held out: the later half of the test, not in-sample
 
 
+def test_tests_on_several_terrains_are_flagged():
+    """One effect fitted to tests on two terrains cannot tell an effect of one terrain from another's: the
+    analysis says so and lowers the confidence; one terrain, or evidence cached without terrains, is not flagged."""
+    from trackenv.diagnose.core import analysis_flags, flag_penalty
+
+    fitted = {"converged": True}
+    ev = {"n_tests": 3, "terrains": ["dry_sand", "asphalt", "dry_sand"],
+          "candidates": {"recalibrate_base": fitted, "sensor_artifacts": fitted, "pitch_load_transfer": fitted}}
+    flags = analysis_flags(ev, "pitch_load_transfer", restricted=False)
+    assert len(flags) == 1 and flags[0].startswith("tests on 2 terrains (asphalt, dry_sand)")
+    assert flag_penalty(flags) == pytest.approx(0.8)
+    assert analysis_flags(ev | {"terrains": ["asphalt"] * 3}, "pitch_load_transfer", restricted=False) == []
+    assert analysis_flags({k: v for k, v in ev.items() if k != "terrains"}, "pitch_load_transfer", False) == []
+
+
 def test_cli_bad_folder_exits_2(tmp_path, capsys):
     from trackenv.cli import main
 

@@ -11,7 +11,7 @@ and how far the gap closes once that effect is added (docs/model.md §8).
    on the rest). Fits: derivative-free search, then Levenberg-Marquardt through the simulator (:mod:`.polish`).
 3. **Verdict** — :func:`decide`, from the cached per-sample evidence (:func:`evidence`); see ``RULE_TEXT``.
 4. **How far** — held-out and in-sample gap shrink, each with a block-bootstrap 95 % interval that
-   contains its point estimate; flags (single test, controls dropped, not converged) in the verdict line.
+   contains its point estimate; flags (single test, controls dropped, not converged, several terrains) in the verdict line.
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ RULE_TEXT = (
     "best-scoring effect. "
     "Confidence: 1 - (largest corrected p-value the named effect had to pass); for `none`, the smallest such "
     "value of any effect; times 0.7 for a single test, 0.5 when a control was not fitted, 0.8 when the fit did "
-    "not converge.")
+    "not converge, 0.8 when the tests span several terrains.")
 
 
 @dataclass
@@ -199,7 +199,8 @@ def evidence(data: list[TestData], fits: dict) -> dict:
             ok = masks[j] & t.fit_mask & np.all([np.isfinite(err[n][j][sig]) for n in fits], axis=0)
             for n in fits:
                 err[n][j][sig] = np.where(ok, err[n][j][sig], np.nan)
-    ev = {"tests": [t.name for t in data], "n_tests": len(data), "gap_cells_tested": len(cells),
+    ev = {"tests": [t.name for t in data], "terrains": [t.terrain for t in data], "n_tests": len(data),
+          "gap_cells_tested": len(cells),
           "gap_p": min(1.0, min(c["p"] for c in cells) * len(cells)) if cells else 1.0,
           "gap_z_max": max((c["z"] for c in cells), default=0.0), "gap_cells": cells,
           "gap_before": gap_before, "gap_before_heldout": gap_before_held, "candidates": {},
@@ -401,10 +402,16 @@ def analysis_flags(ev: dict, chosen: str, restricted: bool) -> list[str]:
                                                                      else " (not applicable)"))
     if not ev["candidates"][chosen]["converged"]:
         flags.append(f"fit of {chosen} not converged")
+    terrains = sorted(set(ev.get("terrains", [])))  # evidence cached before terrains were recorded: unknown
+    if len(terrains) > 1:
+        flags.append(f"tests on {len(terrains)} terrains ({', '.join(terrains)}): one effect is fitted to all of them, "
+                     "so an effect of one terrain is not separated from another's (diagnose each terrain with --tests)")
     return flags
 
 
 def flag_penalty(flags: list[str]) -> float:
+    """The confidence factor of the analysis flags: 0.7 for a single test, 0.5 for a missing control, 0.8 for a
+    fit that did not converge and 0.8 for tests on several terrains."""
     k = 1.0
     for f in flags:
         k *= 0.7 if f.startswith("single") else 0.5 if f.startswith("controls") else 0.8
