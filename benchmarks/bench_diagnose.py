@@ -1,6 +1,6 @@
 """Wall time of a 6-test gap diagnosis (``trackenv.diagnose``) on the synthetic field twin.
 
-    python benchmarks/bench_diagnose.py [--substep 0.001] [--tests a,b,...] [--compare-bucket-fill 0.75]
+    python benchmarks/bench_diagnose.py [--substep 0.001] [--tests a,b,...] [--compare-bucket-fill 0.75] [--each-terrain]
 
 Runs the diagnosis unchanged (its own fit substep unless ``--substep`` is given) on six tests of
 ``data/field/thesis`` (the four go-stops and J-turns and both lane changes), without figures, and
@@ -10,7 +10,9 @@ and for the simulation programs (``trackenv.simulate._simulate_in_parts``, the j
 No compilation cache is used unless ``JAX_COMPILATION_CACHE_DIR`` is set. With ``--compare-bucket-fill F`` it then
 runs the same diagnosis again in the same process with ``trackenv.diagnose.batch.BUCKET_FILL = F`` (the
 rule that decides which tests share a padded batch) and prints both times and the ratio. The default
-rule runs first, so that any warm-up the second run gets favours the alternative.
+rule runs first, so that any warm-up the second run gets favours the alternative. With ``--each-terrain`` the
+same tests are diagnosed one terrain at a time (``trackenv.diagnose.diagnose_each_terrain``): it prints the wall
+time, the combined verdict and each terrain's.
 """
 
 from __future__ import annotations
@@ -54,9 +56,22 @@ def main():
     ap.add_argument("--substep", type=float, default=None)
     ap.add_argument("--compare-bucket-fill", type=float, default=None,
                     help="also run with this BUCKET_FILL, in the same process, and print the ratio")
+    ap.add_argument("--each-terrain", action="store_true", help="one diagnosis per terrain, then the combined verdict")
     a = ap.parse_args()
     kw = {} if a.substep is None else {"substep": a.substep}
     tests = a.tests.split(",")
+    if a.each_terrain:
+        from trackenv.diagnose import diagnose_each_terrain
+
+        jax.monitoring.register_event_duration_secs_listener(_on_duration)
+        t0 = time.perf_counter()
+        r = diagnose_each_terrain(ROOT / "data/field/thesis", None, tests=tests, figures=False, progress=False, **kw)
+        wall = time.perf_counter() - t0
+        print(f"{len(tests)}-test diagnosis, each terrain on its own: {wall:.1f} s wall on {len(parallel.cpu_devices())} "
+              f"host device(s); verdict: {r.verdict['effect']}; {compile_summary()}", flush=True)
+        for terrain, d in r.by_terrain.items():
+            print(f"  {terrain} ({d.report['timing']['wall_s']:.1f} s): {d.verdict['verdict_line']}")
+        return
     fills = [batch.BUCKET_FILL] + ([] if a.compare_bucket_fill is None else [a.compare_bucket_fill])
     data, _ = load_tests(ROOT / "data/field/thesis", tests)  # read once, for the bucket counts only
     walls = []

@@ -796,7 +796,7 @@ def test_cli_passes_after_on_and_points_to_it_when_an_effect_is_named(tmp_path, 
                                report={"data_label": "SYNTHETIC", "gap_cells": [], "timing": {"wall_s": 1.0}})
 
     monkeypatch.setattr(trackenv.diagnose, "diagnose", fake)
-    assert main(["diagnose", TWIN, "--out", str(tmp_path / "first")]) == 0
+    assert main(["diagnose", TWIN, "--out", str(tmp_path / "first"), "--terrains", "pooled"]) == 0
     assert f"--after {tmp_path / 'first' / 'report.json'}" in capsys.readouterr().out
     report = _report_naming(tmp_path / "first")
     assert main(["diagnose", TWIN, "--out", str(tmp_path / "second"), "--after", str(report)]) == 0

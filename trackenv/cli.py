@@ -7,7 +7,7 @@
     trackenv replay go_stop_dry_sand --out out/r           # a thesis test (reconstructed voltages)
     trackenv replay --list                                 # the thesis test ids
     trackenv field-twin --out data/field/thesis --seed 0   # SYNTHETIC field twin (known effects + noise)
-    trackenv diagnose data/field/thesis --out out/diag     # sim-to-real gap: where, which effect, how far
+    trackenv diagnose data/field/thesis --out out/diag     # sim-to-real gap: where, which effect, how far (per terrain)
     trackenv diagnose-benchmark --cases 14                 # the withheld-effect check on blind cases
     trackenv import borealtc data/measured/borealtc --out out/borealtc   # MEASURED runs -> speed-mode field logs
 """
@@ -189,16 +189,45 @@ def cmd_diagnose(args) -> int:
     only = [x for x in args.tests.split(",") if x] if args.tests else None
     cands = [x for x in args.candidates.split(",") if x] if args.candidates else None
     check_options(seed=args.seed, polish_iters=args.polish_iters, alpha=args.alpha, candidates=cands)  # before --out is made
+    from trackenv.diagnose.terrains import summary_of, terrain_groups
+
     inputs = [args.folder]
+    summary = summary_of(args.after) if args.after is not None else None
+    each = args.terrains == "each"
+    if args.terrains == "auto":  # a summary is continued terrain by terrain, a pooled report pooled
+        if args.after is not None:
+            each = summary is not None
+        else:
+            each = len(terrain_groups(args.folder, only)[0]) > 1
+            if each:
+                print("the tests span several terrains: one diagnosis per terrain (--terrains pooled fits one effect "
+                      "to all of them)", file=sys.stderr)
     if args.after is not None:
         from trackenv.diagnose.candidates import named_fits_from_report
 
-        named = named_fits_from_report(args.after, args.internal_resistance)  # readable, and names an effect
-        inputs.append(Path(named[-1].source).parent)  # --out must not overwrite the report it continues
+        if each and summary is not None:
+            inputs.append(summary.parent)
+        else:
+            named = named_fits_from_report(args.after, args.internal_resistance)  # readable, and names an effect
+            inputs.append(Path(named[-1].source).parent)  # --out must not overwrite the report it continues
     prepare_output_dir(args.out, "diagnose", force=args.force, inputs=inputs)
-    d = diagnose(args.folder, args.out, tests=only, internal_resistance=args.internal_resistance, candidates=cands,
-                 seed=args.seed, figures=not args.no_figures, progress=True, polish_iters=args.polish_iters,
-                 alpha=args.alpha, vehicle=args.vehicle, after=args.after)
+    options = dict(tests=only, internal_resistance=args.internal_resistance, candidates=cands, seed=args.seed,
+                   figures=not args.no_figures, progress=True, polish_iters=args.polish_iters, alpha=args.alpha,
+                   vehicle=args.vehicle, after=args.after)
+    if each:
+        from trackenv.diagnose.terrains import diagnose_each_terrain
+
+        r = diagnose_each_terrain(args.folder, args.out, **options)
+        print(f"{r.report['data_label']}")
+        print(f"verdict: {r.verdict['effect']}")
+        for terrain, e in r.report["terrains"].items():
+            print(f"  {terrain} ({', '.join(e['tests'])}): {e['verdict']['verdict_line']}")
+        print(f"report: {Path(args.out) / 'report.md'} ({r.report['timing']['wall_s']:.0f} s)")
+        if r.verdict["effect"] not in ("none", None):
+            print(f"what remains once they are in the model: the same command with --after "
+                  f"{Path(args.out) / 'report.json'} and another --out")
+        return 0
+    d = diagnose(args.folder, args.out, **options)
     v = d.verdict
     print(f"{d.report['data_label']}")
     print(f"verdict: {v['verdict_line']}")
@@ -368,6 +397,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--after", default=None, metavar="REPORT",
                    help="report.json (or its folder) of an earlier diagnosis: the fit it named joins the base model, "
                         "and the candidates look for what remains")
+    g.add_argument("--terrains", default="auto", choices=["auto", "each", "pooled"],
+                   help="each: diagnose each terrain's tests on its own (<out>/<terrain>/) and summarise the verdicts "
+                        "in <out>/report.md; pooled: fit one effect to the tests of every terrain; auto (default): "
+                        "each where the tests span several terrains (or --after names a per-terrain summary)")
     g.add_argument("--force", action="store_true",
                    help="write into the output folder even if it holds field logs trackenv did not write")
     g.set_defaults(func=cmd_diagnose)

@@ -323,6 +323,11 @@ def named_fits_from_report(path, internal_resistance: str) -> tuple[NamedFit, ..
         raise DiagnosisError(f"{path}: no such report (after= needs the report.json of an earlier diagnosis)") from None
     except (OSError, ValueError) as exc:
         raise DiagnosisError(f"{path}: not a readable diagnosis report ({exc})") from None
+    if isinstance(rep, dict) and rep.get("mode") == "each terrain":
+        raise DiagnosisError(f"{path}: a summary of one diagnosis per terrain; continue it with one diagnosis per "
+                             "terrain (trackenv diagnose --terrains each or auto, diagnose_each_terrain: each terrain "
+                             "starts from the fit its own diagnosis named), or pass one terrain's report.json from "
+                             "its sub-folder")
     try:
         verdict, ranking, base_model = rep["verdict"], rep["ranking"], rep["base_model"]
         named, member = verdict["effect"], verdict.get("after_model") or verdict["effect"]

@@ -405,7 +405,8 @@ def analysis_flags(ev: dict, chosen: str, restricted: bool) -> list[str]:
     terrains = sorted(set(ev.get("terrains", [])))  # evidence cached before terrains were recorded: unknown
     if len(terrains) > 1:
         flags.append(f"tests on {len(terrains)} terrains ({', '.join(terrains)}): one effect is fitted to all of them, "
-                     "so an effect of one terrain is not separated from another's (diagnose each terrain with --tests)")
+                     "so an effect of one terrain is not separated from another's (diagnose each terrain on its own: "
+                     "--terrains each)")
     return flags
 
 
