@@ -68,7 +68,9 @@ def main():
         r = diagnose_each_terrain(ROOT / "data/field/thesis", None, tests=tests, figures=False, progress=False, **kw)
         wall = time.perf_counter() - t0
         print(f"{len(tests)}-test diagnosis, each terrain on its own: {wall:.1f} s wall on {len(parallel.cpu_devices())} "
-              f"host device(s); verdict: {r.verdict['effect']}; {compile_summary()}", flush=True)
+              f"host device(s); verdict: {r.verdict['effect']} (over all tests: held-out gap shrink "
+              f"{100 * r.verdict['heldout_gap_shrink']:.0f}%, in-sample {100 * r.verdict['insample_gap_shrink']:.0f}%); "
+              f"{compile_summary()}", flush=True)
         for terrain, d in r.by_terrain.items():
             print(f"  {terrain} ({d.report['timing']['wall_s']:.1f} s): {d.verdict['verdict_line']}")
         return

@@ -21,8 +21,11 @@ SIX = ["go_stop_dry_sand", "go_stop_asphalt", "j_turn_dry_sand", "j_turn_asphalt
        "lane_change_asphalt"]
 
 
-def _verdict(effect, confidence=0.9):
-    return {"effect": effect, "confidence": confidence, "verdict_line": f"{effect} (confidence {confidence:.2f})"}
+def _verdict(effect, confidence=0.9, before=1.0, after=None, ins=0.0):
+    """A verdict of report.json: the held-out gap ``before`` -> ``after`` (unchanged for none), in-sample shrink ``ins``."""
+    return {"effect": effect, "confidence": confidence, "verdict_line": f"{effect} (confidence {confidence:.2f})",
+            "gap_before": before, "gap_before_heldout": before, "gap_after": before if after is None else after,
+            "insample_gap_shrink": ins, "heldout_gap_shrink_ci": [0.1, 0.9], "insample_gap_shrink_ci": [0.2, 0.8]}
 
 
 def test_the_twin_splits_by_the_terrain_its_logs_name():
@@ -49,6 +52,20 @@ def test_the_combined_verdict_names_one_effect_only_where_the_terrains_agree():
     assert differ["effects_by_terrain"] == {"dry_sand": "slip_sinkage", "asphalt": "grouser_stiction"}
     quiet = combined_verdict({"dry_sand": _verdict("none", 0.2), "asphalt": _verdict("none", 0.5)})
     assert quiet["effect"] == "none" and quiet["confidence"] == pytest.approx(0.2)
+    assert quiet["heldout_gap_shrink"] == 0.0
+
+
+def test_the_combined_shrink_is_over_all_tests():
+    """The gap is the root of a mean over tests: sand's 3 tests go from a held-out gap of 2 to 1, asphalt's 1 test
+    stays at 1 (none named there), so the gap over the 4 tests goes from sqrt(13/4) to sqrt(4/4). In sample the
+    same with sand's own in-sample shrink 50 % (2 -> 1). An interval only where one terrain is all there is."""
+    v = combined_verdict({"dry_sand": _verdict("slip_sinkage", before=2.0, after=1.0, ins=0.5),
+                          "asphalt": _verdict("none", before=1.0, ins=0.7)}, {"dry_sand": 3, "asphalt": 1})
+    assert v["heldout_gap_shrink"] == pytest.approx(1.0 - (4 / 13) ** 0.5)
+    assert v["insample_gap_shrink"] == pytest.approx(1.0 - (4 / 13) ** 0.5)
+    assert v["heldout_gap_shrink_ci"] is None
+    alone = combined_verdict({"dry_sand": _verdict("slip_sinkage", before=2.0, after=1.0, ins=0.5)}, {"dry_sand": 3})
+    assert alone["heldout_gap_shrink"] == pytest.approx(0.5) and alone["heldout_gap_shrink_ci"] == [0.1, 0.9]
 
 
 @pytest.fixture
@@ -85,6 +102,7 @@ def test_each_terrain_is_diagnosed_alone_and_summarised(tmp_path, stand_in):
     assert rep["terrains"]["dry_sand"]["report"] == "dry_sand/report.json"
     md = (tmp_path / "each" / "report.md").read_text()
     assert "[dry_sand/report.md](dry_sand/report.md)" in md and "**Verdict: several**" in md
+    assert "Over all 6 tests, with each terrain's named effect in its model: held-out gap shrink 0%" in md
 
 
 def test_after_a_summary_each_terrain_continues_its_own_fit(tmp_path, stand_in):

@@ -219,7 +219,9 @@ def cmd_diagnose(args) -> int:
 
         r = diagnose_each_terrain(args.folder, args.out, **options)
         print(f"{r.report['data_label']}")
-        print(f"verdict: {r.verdict['effect']}")
+        shrink = ("" if r.verdict["effect"] == "none" else f" (over all tests: held-out gap shrink "
+                  f"{100 * r.verdict['heldout_gap_shrink']:.0f}%, in-sample {100 * r.verdict['insample_gap_shrink']:.0f}%)")
+        print(f"verdict: {r.verdict['effect']}{shrink}")
         for terrain, e in r.report["terrains"].items():
             print(f"  {terrain} ({', '.join(e['tests'])}): {e['verdict']['verdict_line']}")
         print(f"report: {Path(args.out) / 'report.md'} ({r.report['timing']['wall_s']:.0f} s)")

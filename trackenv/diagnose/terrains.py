@@ -25,6 +25,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ..compare import json_clean as _clean
 from .candidates import NONE
 from .core import Diagnosis, check_options, diagnose
@@ -71,10 +73,11 @@ def folder_name(terrain: str, taken: set[str]) -> str:
     return name
 
 
-def combined_verdict(verdicts: dict) -> dict:
+def combined_verdict(verdicts: dict, n_tests: dict | None = None) -> dict:
     """The summary's verdict from each terrain's (``{terrain: verdict dict of report.json}``): ``none``, the one
     effect every terrain that names one names, or ``several``. Its confidence is the lowest of the confidences of
-    the terrains that name an effect (of all the terrains where none does)."""
+    the terrains that name an effect (of all the terrains where none does). ``n_tests``: {terrain: number of
+    tests} for :func:`combined_shrink` (default one each)."""
     effects = {t: v["effect"] for t, v in verdicts.items()}
     named = sorted({e for e in effects.values() if e not in (NONE, None)})
     naming = [t for t, e in effects.items() if e not in (NONE, None)]
@@ -88,8 +91,32 @@ def combined_verdict(verdicts: dict) -> dict:
     else:
         quiet = [t for t in verdicts if t not in naming]
         head = f"{effect} on {', '.join(naming)}" + (f"; none on {', '.join(quiet)}" if quiet else "")
-    return {"effect": effect, "confidence": conf, "effects_by_terrain": effects,
-            "verdict_line": head + " | " + " | ".join(parts)}
+    out = {"effect": effect, "confidence": conf, "effects_by_terrain": effects,
+           "verdict_line": head + " | " + " | ".join(parts)}
+    return out | combined_shrink(verdicts, n_tests or {t: 1 for t in verdicts})
+
+
+def combined_shrink(verdicts: dict, n_tests: dict) -> dict:
+    """The gap shrink over all the tests with each terrain's named effect in its model (the base model where a
+    terrain names none), held out and in sample. The gap (noise units, :func:`.metrics.overall_gap`) is the root
+    of a mean over tests, so the terrains' squared gaps combine weighted by their test counts. The intervals are
+    the terrain's own where there is one terrain, and None otherwise: the terrains' bootstraps are not joined, and
+    one terrain's interval need not contain the combined figure."""
+    w = {t: n_tests[t] / sum(n_tests.values()) for t in verdicts}
+    named = [t for t, v in verdicts.items() if v["effect"] not in (NONE, None)]
+
+    def shrink(before_key: str, after_of) -> float:
+        before = sum(w[t] * verdicts[t][before_key] ** 2 for t in verdicts)
+        after = sum(w[t] * (after_of(t) if t in named else verdicts[t][before_key]) ** 2 for t in verdicts)
+        return float(1.0 - np.sqrt(after / before)) if before > 0 else 0.0
+
+    held = shrink("gap_before_heldout", lambda t: verdicts[t]["gap_after"])
+    ins = shrink("gap_before", lambda t: verdicts[t]["gap_before"] * (1.0 - verdicts[t]["insample_gap_shrink"]))
+    one = verdicts[named[0]] if named and len(verdicts) == 1 else None
+    return {"heldout_gap_shrink": held if named else 0.0, "insample_gap_shrink": ins if named else 0.0,
+            "heldout_gap_shrink_ci": None if one is None else one["heldout_gap_shrink_ci"],
+            "insample_gap_shrink_ci": None if one is None else one["insample_gap_shrink_ci"],
+            "shrink_over": "all tests, each terrain's named effect in its model (the base model where it names none)"}
 
 
 def _summary_md(report: dict) -> str:
@@ -97,7 +124,11 @@ def _summary_md(report: dict) -> str:
     lines = [
         "# Gap diagnosis, each terrain on its own", "",
         f"Folder: `{report['folder']}`. {report['data_label']}", "",
-        f"**Verdict: {v['effect']}** (lowest confidence among the terrains it rests on: {v['confidence']:.2f}).", "",
+        f"**Verdict: {v['effect']}** (lowest confidence among the terrains it rests on: {v['confidence']:.2f})."
+        + ("" if v["effect"] == NONE else
+           f" Over all {sum(len(e['tests']) for e in report['terrains'].values())} tests, with each terrain's named "
+           f"effect in its model: held-out gap shrink {100 * v['heldout_gap_shrink']:.0f}%, in-sample "
+           f"{100 * v['insample_gap_shrink']:.0f}%."), "",
         "The tests were split by the terrain their meta.json names and each group was diagnosed on its own, with "
         "the same options; an effect common to every terrain (of the vehicle or its instruments) is therefore "
         "fitted on each terrain's tests alone, with less data than one pooled diagnosis has.", "",
@@ -173,7 +204,7 @@ def diagnose_each_terrain(folder: str | Path, out_dir: str | Path | None = None,
         by_terrain[terrain] = diagnose(folder, None if out_dir is None else Path(out_dir) / sub, tests=names,
                                        figures=figures, progress=progress, after=_after_for(after, terrain),
                                        cache=None if cache is None else Path(cache) / sub, **options)
-    verdict = combined_verdict({t: d.verdict for t, d in by_terrain.items()})
+    verdict = combined_verdict({t: d.verdict for t, d in by_terrain.items()}, {t: len(g) for t, g in groups.items()})
     first = next(iter(by_terrain.values()))
     report = {
         "tool": "trackenv diagnose", "mode": MODE, "folder": str(folder),
