@@ -47,7 +47,9 @@ def test_the_combined_verdict_names_one_effect_only_where_the_terrains_agree():
     agree = combined_verdict({"dry_sand": _verdict("slip_sinkage", 0.8), "asphalt": _verdict("none", 0.3)})
     assert agree["effect"] == "slip_sinkage" and agree["confidence"] == pytest.approx(0.8)
     assert agree["verdict_line"].startswith("slip_sinkage on dry_sand; none on asphalt")
-    differ = combined_verdict({"dry_sand": _verdict("slip_sinkage", 0.8), "asphalt": _verdict("grouser_stiction", 0.6)})
+    differ = combined_verdict({"dry_sand": _verdict("slip_sinkage", 0.8) | {"flags": ["fit of slip_sinkage not converged"]},
+                               "asphalt": _verdict("grouser_stiction", 0.6)})
+    assert differ["flags"] == ["dry_sand: fit of slip_sinkage not converged"]
     assert differ["effect"] == "several" and differ["confidence"] == pytest.approx(0.6)
     assert differ["effects_by_terrain"] == {"dry_sand": "slip_sinkage", "asphalt": "grouser_stiction"}
     quiet = combined_verdict({"dry_sand": _verdict("none", 0.2), "asphalt": _verdict("none", 0.5)})

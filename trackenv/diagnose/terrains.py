@@ -76,8 +76,9 @@ def folder_name(terrain: str, taken: set[str]) -> str:
 def combined_verdict(verdicts: dict, n_tests: dict | None = None) -> dict:
     """The summary's verdict from each terrain's (``{terrain: verdict dict of report.json}``): ``none``, the one
     effect every terrain that names one names, or ``several``. Its confidence is the lowest of the confidences of
-    the terrains that name an effect (of all the terrains where none does). ``n_tests``: {terrain: number of
-    tests} for :func:`combined_shrink` (default one each)."""
+    the terrains that name an effect (of all the terrains where none does); its flags are the terrains' own,
+    each prefixed with its terrain. ``n_tests``: {terrain: number of tests} for :func:`combined_shrink`
+    (default one each)."""
     effects = {t: v["effect"] for t, v in verdicts.items()}
     named = sorted({e for e in effects.values() if e not in (NONE, None)})
     naming = [t for t, e in effects.items() if e not in (NONE, None)]
@@ -91,7 +92,8 @@ def combined_verdict(verdicts: dict, n_tests: dict | None = None) -> dict:
     else:
         quiet = [t for t in verdicts if t not in naming]
         head = f"{effect} on {', '.join(naming)}" + (f"; none on {', '.join(quiet)}" if quiet else "")
-    out = {"effect": effect, "confidence": conf, "effects_by_terrain": effects,
+    flags = [f"{t}: {f}" for t, v in verdicts.items() for f in v.get("flags", [])]
+    out = {"effect": effect, "confidence": conf, "effects_by_terrain": effects, "flags": flags,
            "verdict_line": head + " | " + " | ".join(parts)}
     return out | combined_shrink(verdicts, n_tests or {t: 1 for t in verdicts})
 
