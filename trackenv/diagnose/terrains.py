@@ -18,6 +18,7 @@ single-test design (forward chaining, flagged).
 
 from __future__ import annotations
 
+import inspect
 import json
 import re
 import sys
@@ -146,31 +147,38 @@ def _summary_md(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def summary_of(after: str | Path) -> Path | None:
-    """The path of ``after``'s ``report.json`` if it is a summary written by :func:`diagnose_each_terrain`, else
-    None (a single diagnosis's report, or a file that :func:`.candidates.named_fits_from_report` will reject)."""
+def _read_summary(after: str | Path) -> tuple[Path, dict] | None:
+    """``(path of its report.json, its content)`` if ``after`` is a summary written by :func:`diagnose_each_terrain`,
+    else None (a single diagnosis's report, or a file that :func:`.candidates.named_fits_from_report` will reject)."""
     path = Path(after)
     report = path / "report.json" if path.is_dir() else path
     try:
         rep = json.loads(report.read_text())
     except (OSError, ValueError):
         return None
-    return report if isinstance(rep, dict) and rep.get("mode") == MODE else None
+    return (report, rep) if isinstance(rep, dict) and rep.get("mode") == MODE else None
 
 
-def _after_for(after: str | Path | None, terrain: str) -> str | Path | None:
-    """The ``after`` report for one terrain's diagnosis: a summary of this module gives each terrain its own
+def summary_of(after: str | Path) -> Path | None:
+    """The path of ``after``'s ``report.json`` if it is a summary written by :func:`diagnose_each_terrain`, else None."""
+    found = _read_summary(after)
+    return None if found is None else found[0]
+
+
+def _after_by_terrain(after: str | Path | None, terrains) -> dict:
+    """{terrain: the ``after`` report of its diagnosis}: a summary of this module gives each terrain its own
     terrain's report (None where that terrain named no effect or was not in it); a single diagnosis's report
-    applies to every terrain."""
-    if after is None:
-        return None
-    summary = summary_of(after)
-    if summary is None:
-        return after
-    entry = json.loads(summary.read_text()).get("terrains", {}).get(terrain)
-    if entry is None or entry.get("verdict", {}).get("effect") in (NONE, None):
-        return None
-    return summary.parent / entry["report"]
+    applies to every terrain. The summary is read once."""
+    found = None if after is None else _read_summary(after)
+    if found is None:
+        return dict.fromkeys(terrains, after)
+    path, rep = found
+    out = {}
+    for terrain in terrains:
+        entry = rep.get("terrains", {}).get(terrain)
+        named = entry is not None and entry.get("verdict", {}).get("effect") not in (NONE, None)
+        out[terrain] = path.parent / entry["report"] if named else None
+    return out
 
 
 def diagnose_each_terrain(folder: str | Path, out_dir: str | Path | None = None, *, tests: list[str] | None = None,
@@ -192,9 +200,10 @@ def diagnose_each_terrain(folder: str | Path, out_dir: str | Path | None = None,
         DiagnosisError: nothing usable in ``folder``, or a bad option (checked before any fit starts).
     """
     t_start = time.perf_counter()
-    check_options(**{k: options[k] for k in ("seed", "rounds", "search_points", "polish_iters", "alpha", "substep",
-                                             "pad_s", "candidates") if k in options})
+    checked = inspect.signature(check_options).parameters
+    check_options(**{k: v for k, v in options.items() if k in checked})
     groups, excluded = terrain_groups(folder, tests)
+    afters = _after_by_terrain(after, groups)
     taken: set[str] = set()
     subs = {terrain: folder_name(terrain, taken) for terrain in groups}
     cache = options.pop("cache", None)
@@ -204,7 +213,7 @@ def diagnose_each_terrain(folder: str | Path, out_dir: str | Path | None = None,
         if progress:
             print(f"diagnosing {terrain}: {', '.join(names)}", file=sys.stderr, flush=True)
         by_terrain[terrain] = diagnose(folder, None if out_dir is None else Path(out_dir) / sub, tests=names,
-                                       figures=figures, progress=progress, after=_after_for(after, terrain),
+                                       figures=figures, progress=progress, after=afters[terrain],
                                        cache=None if cache is None else Path(cache) / sub, **options)
     verdict = combined_verdict({t: d.verdict for t, d in by_terrain.items()}, {t: len(g) for t, g in groups.items()})
     first = next(iter(by_terrain.values()))
