@@ -4,7 +4,9 @@
   ``EXP_LOG_POWER_MIN`` vehicles; both against float64 numpy, with a finite gradient at x = 0.
 - ``simulate.shared_leaves_as_scalars``: a batch's parameter leaves that hold one value for every vehicle
   become scalars; the simulation equals the one with the per-vehicle arrays to rounding, and leaves that
-  differ between vehicles, or are traced, stay as they are.
+  differ between vehicles, or are traced, stay as they are. The leaves the diagnosis's control scales stay
+  arrays when asked (``keep``), so that its batches on asphalt (zero cohesion) and sand share a program,
+  with the scalar form's numbers to the last bit.
 - ``sums.divide_by_parameter``: the division by J_eff, kept a division in the compiled program, so that a
   per-vehicle J_eff does not make XLA copy the per-track chain into every contact point's fusion.
 """
@@ -112,3 +114,43 @@ def test_a_per_vehicle_drive_inertia_compiles_to_the_same_kernels_as_a_shared_on
                               shared.vehicle.drive_inertia * jnp.linspace(0.9, 1.1, n, dtype=jnp.float32))
     ratio = _fused_instructions(per_vehicle, n) / _fused_instructions(shared, n)
     assert ratio < 1.1, ratio
+
+
+def _control_batch(terrain: str, n: int = 4):
+    """The control's batch on ``terrain``: cohesion, friction angle and shear modulus scaled per vehicle, as
+    :meth:`trackenv.diagnose.candidates.Candidate.apply` scales them, and voltages for a short drive."""
+    base = te.load_params(terrain)
+    f = [1.0 + 0.05 * k for k in range(n)]
+    trees = [te.replace(base, **{"terrain.cohesion": float(base.terrain.cohesion) * f[k],
+                                 "terrain.friction_angle": float(base.terrain.friction_angle) * f[k],
+                                 "terrain.shear_modulus": float(base.terrain.shear_modulus) * f[k]})
+             for k in range(n)]
+    rows = np.array([[0, 0, 0], [0.1, 12.0, 8.0], [0.5, 12.0, 8.0], [0.6, 0.0, 0.0]])
+    return stack_trees(trees), te.VoltageProfile.from_arrays(rows[:, 0], np.repeat(rows[:, 1:, None], n, axis=2))
+
+
+def test_the_diagnosis_keeps_its_scaled_leaves_arrays_so_terrains_share_a_program():
+    """Asphalt's cohesion is zero whatever the control's factor: equal across the batch, it became a scalar,
+    where sand's stayed an array, and each terrain compiled its own program. Kept as arrays, one program serves
+    both, and asphalt's numbers are the scalar form's to the last bit."""
+    from trackenv.diagnose.candidates import RECALIBRATE_LEAVES
+    from trackenv.simulate import simulate_on_cores
+
+    asphalt, prof = _control_batch("asphalt")
+    sand, _ = _control_batch("dry_sand")
+    assert float(asphalt.terrain.cohesion[0]) == 0.0
+    assert shared_leaves_as_scalars(asphalt, (4,)).terrain.cohesion.shape == ()
+    assert shared_leaves_as_scalars(asphalt, (4,), RECALIBRATE_LEAVES).terrain.cohesion.shape == (4,)
+    assert shared_leaves_as_scalars(asphalt, (4,), RECALIBRATE_LEAVES).vehicle.mass.shape == ()  # not kept
+
+    def run(params, keep):
+        traj = simulate_on_cores(params, prof, 16, 0.05, 100, keep_arrays=keep)
+        return {k: np.asarray(v) for k, v in traj.channels.items()}
+
+    kept = run(asphalt, RECALIBRATE_LEAVES)
+    before = _simulate_jit._cache_size()
+    run(sand, RECALIBRATE_LEAVES)
+    assert _simulate_jit._cache_size() == before  # sand reuses asphalt's program
+    scalar = run(asphalt, frozenset())
+    for ch in ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "heading"):
+        np.testing.assert_array_equal(kept[ch], scalar[ch], err_msg=ch)

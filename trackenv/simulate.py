@@ -291,7 +291,7 @@ def profile_values(profile: VoltageProfile | SpeedProfile) -> jax.Array:
 
 
 def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: int, dt: float, substeps: int,
-                      initial: State | None = None) -> Trajectory:
+                      initial: State | None = None, keep_arrays: frozenset[str] = frozenset()) -> Trajectory:
     """:func:`simulate_batch` of a one-axis vehicle batch, split over the host devices (both cores) when
     :func:`trackenv.parallel.split_count` says so; otherwise exactly :func:`simulate_batch`.
 
@@ -308,9 +308,13 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
     (tests/test_parallel.py); a batch of 378 vehicles ran 2.5x faster split (docs/performance.md). A batch of
     more than ``MAX_PER_DEVICE`` vehicles per core runs as equal chunks, one after the other (:func:`_in_chunks`; on
     a CPU only: :func:`trackenv.parallel.chunk_limit`).
+
+    ``keep_arrays``: leaf paths (``"terrain.cohesion"``) that stay per-vehicle arrays even where every vehicle
+    holds the same value (:func:`shared_leaves_as_scalars`), so that batches whose values differ only in that
+    share one compiled program.
     """
     batch = profile_values(profile).shape[2:]
-    params = shared_leaves_as_scalars(params, tuple(batch))
+    params = shared_leaves_as_scalars(params, tuple(batch), keep_arrays)
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((params, profile, initial)))
     B = batch[0] if len(batch) == 1 else 0
     size = parallel.chunk_size(B)
@@ -392,9 +396,16 @@ def _in_chunks(params, profile, n_steps: int, dt: float, substeps: int, initial:
                       join(*[p.t_diverged for p in parts]))
 
 
-def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
+def shared_leaves_as_scalars(params, batch: tuple[int, ...], keep: frozenset[str] = frozenset()):
     """``params`` with every concrete floating leaf of shape ``batch`` whose values are all equal replaced by
-    that one value (a scalar of the same dtype); other leaves, and traced ones, unchanged.
+    that one value (a scalar of the same dtype); other leaves, traced ones and those whose path is in ``keep``
+    (``"terrain.cohesion"``), unchanged.
+
+    A leaf's form is part of the compiled program. The diagnosis keeps the leaves its fits scale as arrays
+    (:attr:`trackenv.diagnose.candidates.Candidate.varied_leaves`): on asphalt the cohesion is zero, so a
+    scaled cohesion was equal across the batch and became a scalar, where on sand it stayed an array, and
+    each terrain compiled its own programs. Kept as arrays, the programs are shared and give the same
+    numbers to the last bit (tests/test_batch_forms.py).
 
     The model broadcasts a scalar parameter over the vehicles exactly as a constant (*b) array, so the
     simulation is the same. It was introduced when a (*b) ``drive_inertia`` or ``track_gauge`` made the
@@ -404,14 +415,15 @@ def shared_leaves_as_scalars(params, batch: tuple[int, ...]):
     measured since (docs/performance.md). Batches built by stacking per-test parameters
     (:func:`trackenv.compare.stack_trees`) share most leaves.
     """
-    def one(x):
+    def one(path, x):
         if (isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and x.shape == batch and x.size > 1
-                and jnp.issubdtype(x.dtype, jnp.floating)):
+                and jnp.issubdtype(x.dtype, jnp.floating)
+                and not (keep and jax.tree_util.keystr(path, simple=True, separator=".") in keep)):
             values = np.asarray(x)
             if (values == values.flat[0]).all():
                 return jnp.asarray(values.flat[0], x.dtype)
         return x
-    return jax.tree.map(one, params)
+    return jax.tree_util.tree_map_with_path(one, params)
 
 
 def simulate_batch(params, profile: VoltageProfile | SpeedProfile, n_steps: int, dt: float, substeps: int,

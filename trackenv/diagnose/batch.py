@@ -192,7 +192,7 @@ class BatchSimulator:
                     progress(nb * S)
                 continue
             params = self._params(b, cand, values, S)
-            ch, div = self._simulate(b, params, nb * S)
+            ch, div = self._simulate(b, params, nb * S, cand)
             if cand.name == "none" and S == 1:
                 self._base_channels[bi] = (ch, div)
             for q, j in enumerate(b.tests):
@@ -223,10 +223,12 @@ class BatchSimulator:
         vals = {k: np.tile(np.asarray(v, np.float64), nb) for k, v in values.items()}
         return cand.apply(base, vals, ref)
 
-    def _simulate(self, b: Bucket, params, n_vehicles: int) -> tuple[dict, np.ndarray]:
-        """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,)."""
+    def _simulate(self, b: Bucket, params, n_vehicles: int, cand: Candidate | None = None) -> tuple[dict, np.ndarray]:
+        """Simulate bucket ``b``'s tests (each repeated ``n_vehicles / nb`` times): raw channels (T, B), diverged (B,).
+        ``cand``'s scaled leaves stay arrays (:attr:`.candidates.Candidate.varied_leaves`)."""
         prof = b.profile(n_vehicles // len(b.tests), params.dtype)
-        traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps)  # (n_vehicles,) batch, both cores
+        keep = cand.varied_leaves if cand is not None else frozenset()
+        traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps, keep_arrays=keep)  # (n_vehicles,), both cores
         self.n_vehicle_seconds += n_vehicles * b.n_steps * b.dt
         return {k: np.asarray(v, np.float64) for k, v in traj.channels.items()}, np.asarray(traj.diverged)
 
@@ -248,7 +250,7 @@ class BatchSimulator:
         if key not in self._on_channels:
             U = uniq.shape[0]
             params = self._params(b, below, {k: uniq[:, i] for i, k in enumerate(names)}, U)
-            self._on_channels[key] = (self._simulate(b, params, len(b.tests) * U)[0], U)
+            self._on_channels[key] = (self._simulate(b, params, len(b.tests) * U, below)[0], U)
         ch, U = self._on_channels[key]
         cols = np.concatenate([q * U + inv for q in range(len(b.tests))])
         return {k: v[:, cols] for k, v in ch.items()}

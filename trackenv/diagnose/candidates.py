@@ -81,6 +81,9 @@ class KnotInternalResistance(Effect):
 NONE = "none"
 RECALIBRATE = "recalibrate_base"
 ON = "on."  # prefix of the values of the candidate an effect stands on (:attr:`Candidate.on`)
+# the parameter leaves the control's factors scale (:meth:`Candidate.apply`)
+RECALIBRATE_LEAVES = frozenset({"terrain.cohesion", "terrain.friction_angle", "terrain.shear_modulus",
+                                "internal.constant", "internal.viscous", "vehicle.stiction_torque"})
 ON_BASE = "@base"  # suffix of the fit of an effect on the base model itself, beside its fit on the control
 
 
@@ -152,6 +155,15 @@ class Candidate:
         if self.name == "grouser_stiction" and all(terrains_deformable):
             return "acts on hard ground only; every test is on deformable ground"
         return None
+
+    @property
+    def varied_leaves(self) -> frozenset[str]:
+        """Paths of the base parameters this candidate's values scale per vehicle (the control's factors, here or
+        in the candidate it stands on). Its simulations keep them arrays even where the values coincide
+        (:func:`trackenv.simulate.shared_leaves_as_scalars`: asphalt's cohesion is zero whatever the factor),
+        so that one compiled program serves every terrain."""
+        own = RECALIBRATE_LEAVES if self.name == RECALIBRATE else frozenset()
+        return own | (self.on.varied_leaves if self.on is not None else frozenset())
 
     @property
     def is_effect(self) -> bool:

@@ -432,9 +432,9 @@ def _polish_branches(sim, cand, fold_defs, picks: list[_Pick], polish_iters, jac
     branch-major), split back per branch; ``None`` per branch where nothing is polished.
 
     The fits of an effect on the control and on the base model differ only in the values they stand on, so one
-    compiled simulation serves both. Polished apart, where every test has the same base values (one terrain),
-    the base branch's factor leaves were all equal, became scalars (:func:`trackenv.simulate.shared_leaves_as_scalars`)
-    and made a program of their own, compiled once more per effect. Each row keeps its own damping and stopping
+    compiled simulation serves both. (Polished apart, where every test has the same base values (one terrain),
+    the base branch's factor leaves were all equal and became scalars, a program of their own, compiled once more
+    per effect; those leaves now stay arrays, :attr:`.candidates.Candidate.varied_leaves`.) Each row keeps its own damping and stopping
     (:func:`.polish.polish_folds`), so a row's iterations are those it would take alone; its batch, and so its
     float rounding, changes."""
     if not (cand.n_params and polish_iters > 0):

@@ -126,7 +126,8 @@ class _Problem:
                     ch = eff.instruments(ch, t, params)
             else:
                 prof = b.profile(F, params.dtype)
-                traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps)  # (nb * F,) vehicles
+                traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps,
+                                         keep_arrays=cand.varied_leaves)  # (nb * F,) vehicles
                 ch = dict(traj.channels)
                 if np.any(windows > 0):
                     win = jnp.asarray(np.tile(windows, nb), params.dtype)
