@@ -154,3 +154,28 @@ def test_the_diagnosis_keeps_its_scaled_leaves_arrays_so_terrains_share_a_progra
     scalar = run(asphalt, frozenset())
     for ch in ("speed_ideal", "yaw_rate", "i_left", "i_right", "x", "heading"):
         np.testing.assert_array_equal(kept[ch], scalar[ch], err_msg=ch)
+
+
+def test_the_control_scales_exactly_the_leaves_it_keeps_as_arrays():
+    """``RECALIBRATE_LEAVES`` names what ``Candidate.apply`` scales for the control: every leaf that a factor
+    other than 1 changes, and no other (a vehicle without internal resistance of its own included, whose
+    stiction torque the control then scales)."""
+    from trackenv.diagnose.candidates import RECALIBRATE_LEAVES, candidate_set
+
+    control = {c.name: c for c in candidate_set()}["recalibrate_base"]
+    constant = te.load_params("dry_sand", internal_resistance="constant")
+    viscous = te.load_params("dry_sand", internal_resistance="viscous")
+    without = te.replace(constant, **{"internal.constant": 0.0, "internal.viscous": 0.0})
+    base = stack_trees([constant, viscous, without])
+    factors = {"internal_resistance_factor": 1.3, "cohesion_factor": 0.7, "friction_angle_factor": 1.1,
+               "shear_modulus_factor": 1.2}
+    scaled = control.apply(base, {k: np.full(3, v) for k, v in factors.items()}, {})
+
+    def leaves(tree):
+        return {jax.tree_util.keystr(k, simple=True, separator="."): np.asarray(v)
+                for k, v in jax.tree_util.tree_flatten_with_path(tree)[0]}
+
+    before, after = leaves(base), leaves(scaled)
+    changed = {k for k in before if not np.array_equal(before[k], after[k])}
+    assert changed == RECALIBRATE_LEAVES
+    assert {"terrain.cohesion", "vehicle.stiction_torque"} <= changed
