@@ -118,7 +118,10 @@ def test_a_per_vehicle_drive_inertia_compiles_to_the_same_kernels_as_a_shared_on
 
 def _control_batch(terrain: str, n: int = 4):
     """The control's batch on ``terrain``: cohesion, friction angle and shear modulus scaled per vehicle, as
-    :meth:`trackenv.diagnose.candidates.Candidate.apply` scales them, and voltages for a short drive."""
+    :meth:`trackenv.diagnose.candidates.Candidate.apply` scales them, and voltages for a short drive. Unlike
+    :func:`_batch` (cohesion only), the friction angle and shear modulus differ between vehicles, as in the
+    control's fits: kept or not, they are arrays, and only asphalt's zero cohesion changes form. (A kept leaf
+    whose values are equal and non-zero can round differently from its scalar form, by an ulp.)"""
     base = te.load_params(terrain)
     f = [1.0 + 0.05 * k for k in range(n)]
     trees = [te.replace(base, **{"terrain.cohesion": float(base.terrain.cohesion) * f[k],

@@ -404,8 +404,9 @@ def shared_leaves_as_scalars(params, batch: tuple[int, ...], keep: frozenset[str
     A leaf's form is part of the compiled program. The diagnosis keeps the leaves its fits scale as arrays
     (:attr:`trackenv.diagnose.candidates.Candidate.varied_leaves`): on asphalt the cohesion is zero, so a
     scaled cohesion was equal across the batch and became a scalar, where on sand it stayed an array, and
-    each terrain compiled its own programs. Kept as arrays, the programs are shared and give the same
-    numbers to the last bit (tests/test_batch_forms.py).
+    each terrain compiled its own programs. Kept as arrays, the programs are shared; a zero leaf gives the
+    same numbers in either form to the last bit (tests/test_batch_forms.py), while a kept leaf whose values
+    are equal and non-zero can round differently from its scalar form (by an ulp in a test batch).
 
     The model broadcasts a scalar parameter over the vehicles exactly as a constant (*b) array, so the
     simulation is the same. It was introduced when a (*b) ``drive_inertia`` or ``track_gauge`` made the
