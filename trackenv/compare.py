@@ -86,6 +86,8 @@ def at_samples(x, weights: SampleWeights):
     i0, w = weights
     if w.ndim != x.ndim:
         w = w.reshape(w.shape[:1] + (1,) * (x.ndim - 1))
+    if isinstance(x, np.ndarray) and x.dtype == np.float32:  # each factor rounded to float32 as jax rounds it
+        return x[i0] * (1.0 - w).astype(np.float32) + x[i0 + 1] * w.astype(np.float32)
     return x[i0] * (1.0 - w) + x[i0 + 1] * w
 
 

@@ -165,7 +165,11 @@ def shard(tree, batch: int, axis: int = -1, min_per_device: int | None = None):
     mesh = Mesh(np.array(cpu_devices()[:n]), ("vehicles",))
 
     def put(x):
-        x = jax.numpy.asarray(x)
+        # placed from the host: placing a device array's slices on other devices compiles a slicing program for
+        # every shape (a weakly typed leaf keeps its type through jax.numpy)
+        host = isinstance(x, (jax.Array, np.ndarray)) and not isinstance(x, jax.core.Tracer) and not getattr(
+            x, "weak_type", False)
+        x = np.asarray(x) if host else jax.numpy.asarray(x)
         if x.ndim and x.shape[axis] == batch:
             return jax.device_put(x, batch_sharding(x.ndim, axis, batch, min_per_device))
         return jax.device_put(x, NamedSharding(mesh, PartitionSpec()))

@@ -210,7 +210,7 @@ class BatchSimulator:
         with the fits an earlier diagnosis named (``named``) added, and the per-vehicle references of
         :meth:`.candidates.Candidate.apply`."""
         base = stack_trees([self.base[j] for j in b.tests])  # leaves (nb,)
-        base = jax.tree.map(lambda x: jnp.repeat(x, S, axis=-1) if eqx.is_inexact_array(x) else x, base)
+        base = jax.tree.map(lambda x: _repeat_vehicles(x, S) if eqx.is_inexact_array(x) else x, base)
         ref = {"b_int_constant": np.repeat(self.b_int_constant[list(b.tests)], S)}
         for nf in self.named:
             base = nf.apply(base, ref)
@@ -275,6 +275,14 @@ class BatchSimulator:
 
     def _at_log(self, j: int, ch: dict) -> dict:
         return predictions_at_log(self.tests[j], ch, self._interp[j])
+
+
+def _repeat_vehicles(x, S: int):
+    """Each vehicle of leaf ``x`` repeated ``S`` times on the last axis; a concrete (not weakly typed) array is
+    repeated on the host, which compiles nothing (``jnp.repeat`` compiles a program for every shape)."""
+    if isinstance(x, jax.core.Tracer) or getattr(x, "weak_type", False):
+        return jnp.repeat(x, S, axis=-1)
+    return jnp.asarray(np.repeat(np.asarray(x), S, axis=-1))
 
 
 def predictions_at_log(test: TestData, ch: dict, weights: SampleWeights) -> dict:

@@ -58,22 +58,37 @@ def _to_physical_jnp(spec, u):
     return spec.lo + u * (spec.hi - spec.lo)
 
 
-def _encoder_average_jnp(t, x, window):
-    """:func:`.batch.encoder_average` with one window per column (``window`` (S,), 0 = none)."""
+def _host_divide(a, b):
+    """``a / b`` in numpy, rounded as XLA's CPU compiler rounds jax's: a divisor broadcast over ``a`` (a scalar, a
+    row) becomes a multiplication by its reciprocal in ``a``'s precision."""
+    b = np.asarray(b, a.dtype)
+    if b.shape != np.broadcast_shapes(a.shape, b.shape):
+        return a * (a.dtype.type(1.0) / b)
+    return a / b
+
+
+def _encoder_average(t, x, window, host: bool = False):
+    """:func:`.batch.encoder_average` with one window per column (``window`` (S,), 0 = none); jax, or with
+    ``host`` numpy in float32 except the running sum (jax's, whose order of additions numpy's does not share),
+    the same numbers (see :meth:`_Problem._predict`)."""
+    xp = np if host else jnp
+    div = _host_divide if host else jnp.divide
     dt = t[1] - t[0]
-    F = jnp.concatenate([jnp.zeros_like(x[:1]), jnp.cumsum(0.5 * (x[1:] + x[:-1]) * dt, axis=0)])
-    w = jnp.maximum(window, 1e-6)[None, :]
+    steps = 0.5 * (x[1:] + x[:-1]) * dt
+    cum = np.asarray(jnp.cumsum(steps, axis=0)) if host else jnp.cumsum(steps, axis=0)
+    F = xp.concatenate([xp.zeros_like(x[:1]), cum])
+    w = xp.maximum(window, xp.asarray(1e-6, window.dtype))[None, :]
     tau = t[:, None] - w
-    k = jnp.clip(jnp.floor(tau / dt).astype(jnp.int32), 0, len(t) - 2)
-    f = jnp.clip((tau - t[k]) / dt, 0.0, 1.0)
-    cols = jnp.arange(x.shape[1])[None, :]
+    k = xp.clip(xp.floor(div(tau, dt)).astype(xp.int32), 0, len(t) - 2)
+    f = xp.clip(div(tau - t[k], dt), xp.asarray(0.0, x.dtype), xp.asarray(1.0, x.dtype))
+    cols = xp.arange(x.shape[1])[None, :]
     Fi = F[k, cols] * (1 - f) + F[k + 1, cols] * f
-    Fi = jnp.where(tau < 0, x[:1] * tau, Fi)
-    return jnp.where(window[None, :] > 0, (F - Fi) / w, x)
+    Fi = xp.where(tau < 0, x[:1] * tau, Fi)
+    return xp.where(window[None, :] > 0, div(F - Fi, w), x)
 
 
 class _Problem:
-    """The residual function of every fold of one candidate, as one jitted value-and-Jacobian call."""
+    """The residual function of every fold of one candidate, evaluated with its Jacobian in one batched simulation."""
 
     def __init__(self, sim, cand: Candidate, fold_defs, windows, below=None):
         self.sim, self.cand, self.F = sim, cand, len(fold_defs)
@@ -102,12 +117,22 @@ class _Problem:
                 self.sigs.append((j, s))
         self.windows = np.array([0.0 if w is None else float(w) for w in windows])
 
-    def _predict(self, z):
-        """z (R, p), row r a point of fold r mod F -> {(j, sig): (R, K_j)} predictions at the logs' sample times."""
+    def _predict(self, z, host: bool | None = None):
+        """z (R, p), row r a point of fold r mod F -> {(j, sig): (R, K_j)} predictions at the logs' sample times.
+
+        ``host`` (default: unless ``z`` is traced). Traced (forward mode), everything is jax. On the host (the
+        secant Jacobian), the indexing, tiling and transposing and the float32 +, −, ×, ÷ and |x| run in numpy:
+        eagerly, each jax operation compiles a small program for every shape it meets (about 680 programs and
+        20 s in a diagnosis of three tests), and numpy's float32 operations round as jax's do (where XLA
+        rewrites a division, :func:`_host_divide` does the same). The exponentials, the running sums, the
+        candidate's parameter arithmetic and the simulation stay in jax. Both give the same numbers to the last
+        bit (tests/test_polish_programs.py; docs/performance.md, "The polish's evaluations on the host")."""
         sim, cand = self.sim, self.cand
+        host = not isinstance(z, jax.core.Tracer) if host is None else host
         F = z.shape[0]  # rows simulated (a multiple of the number of folds)
         windows = self.windows[np.arange(F) % self.F]
         u = jax.nn.sigmoid(z)
+        u = np.asarray(u) if host else u
         vals = {s.name: _to_physical_jnp(s, u[:, k]) for k, s in enumerate(cand.specs)}
         fold_of = np.arange(F) % self.F
         fixed = {} if self.below is None else {ON + k: np.array([self.below[f][k] for f in fold_of])
@@ -116,7 +141,9 @@ class _Problem:
         for bi, b in enumerate(sim.buckets):
             nb = len(b.tests)
             base, ref = sim.stacked_base(b, F)
-            v = {k: jnp.tile(x, nb) for k, x in vals.items()} | {k: np.tile(x, nb) for k, x in fixed.items()}
+            # jax arrays, so that the candidate's arithmetic on them is jax's (float32 throughout)
+            v = {k: jnp.asarray(np.tile(np.asarray(x), nb)) if host else jnp.tile(x, nb) for k, x in vals.items()}
+            v |= {k: np.tile(x, nb) for k, x in fixed.items()}
             params = cand.apply(base, v, ref)
             t = jnp.arange(b.n_steps + 1, dtype=params.dtype) * b.dt
             if cand.instrument_only:
@@ -129,9 +156,11 @@ class _Problem:
                 traj = simulate_on_cores(params, prof, b.n_steps, b.dt, b.substeps,
                                          keep_arrays=cand.varied_leaves)  # (nb * F,) vehicles
                 ch = dict(traj.channels)
-                if np.any(windows > 0):
-                    win = jnp.asarray(np.tile(windows, nb), params.dtype)
-                    ch["speed_ideal"] = _encoder_average_jnp(t, ch["speed_ideal"], win)
+            if host:
+                ch, t = {k: np.asarray(x) for k, x in ch.items()}, np.asarray(t)
+            if not cand.instrument_only and np.any(windows > 0):
+                win = (np.asarray if host else jnp.asarray)(np.tile(windows, nb), params.dtype)
+                ch["speed_ideal"] = _encoder_average(t, ch["speed_ideal"], win, host)
             for q, j in enumerate(b.tests):
                 cols = slice(q * F, (q + 1) * F)
                 test = sim.tests[j]
@@ -140,15 +169,19 @@ class _Problem:
                 out.update({(j, s): x.T for s, x in at_log.items()})  # (F, K)
         return out
 
-    def _residual(self, z):
-        pred = self._predict(z)
+    def _residual(self, z, host: bool | None = None):
+        """Weighted residuals (R, N) and the predictions of :meth:`_predict` (``host`` as there)."""
+        host = not isinstance(z, jax.core.Tracer) if host is None else host
+        pred = self._predict(z, host)
+        xp = np if host else jnp
         rs = []
         for (j, s), meas, coef in zip(self.sigs, self.meas, self.coef):
-            e = pred[(j, s)] - jnp.asarray(meas, pred[(j, s)].dtype)[None]
+            dtype = pred[(j, s)].dtype
+            e = pred[(j, s)] - xp.asarray(meas, dtype)[None]
             if s == "heading":
                 e = wrap_angle(e)
-            rs.append(e * jnp.asarray(coef[np.arange(e.shape[0]) % self.F], e.dtype))
-        return jnp.concatenate(rs, axis=1), pred
+            rs.append(e * xp.asarray(coef[np.arange(e.shape[0]) % self.F], dtype))
+        return xp.concatenate(rs, axis=1), pred
 
     def _value_and_jac(self, z):
         p = z.shape[1]
@@ -159,20 +192,26 @@ class _Problem:
 
     def _value_and_secant(self, z):
         """Residuals and the central-difference Jacobian over ±``SECANT_STEP`` in z: 2p + 1 points per fold, one
-        batched simulation."""
+        batched simulation (``z`` a float32 numpy array; the arithmetic in numpy, as :meth:`_predict`)."""
         F, p = z.shape
         shifts = np.concatenate([np.zeros((1, p)), SECANT_STEP * np.eye(p), -SECANT_STEP * np.eye(p)])
-        Z = (z[None] + jnp.asarray(shifts, z.dtype)[:, None]).reshape(((2 * p + 1) * F, p))
+        Z = (z[None] + shifts.astype(z.dtype)[:, None]).reshape(((2 * p + 1) * F, p))
         R, pred_all = self._residual(Z)
         R = R.reshape((2 * p + 1, F) + R.shape[1:])
-        J = jnp.moveaxis((R[1: p + 1] - R[p + 1:]) / (2.0 * SECANT_STEP), 0, -1)  # (F, N, p)
-        pred = {k: v[:F] for k, v in pred_all.items()}
+        J = np.moveaxis(_host_divide(R[1: p + 1] - R[p + 1:], 2.0 * SECANT_STEP), 0, -1)  # (F, N, p)
+        # laid out in memory as jax lays them out, so that the float64 products and sums over them add in the same
+        # order
+        J = np.ascontiguousarray(J)
+        pred = {k: np.ascontiguousarray(v[:F]) for k, v in pred_all.items()}
         return R[0], J, pred
 
     def __call__(self, z, jacobian: str = "secant"):
-        # eager: the simulation inside is one jitted call whose JVP jax caches by shape
-        fn = self._value_and_secant if jacobian == "secant" else self._value_and_jac
-        r, J, pred = fn(jnp.asarray(z, jnp.float32))
+        # the simulation inside is one jitted call (forward mode: its JVP, which jax caches by shape)
+        if jacobian == "secant":
+            r, J, pred = self._value_and_secant(np.asarray(z, np.float32))
+        else:
+            r, J, pred = self._value_and_jac(jnp.asarray(z, jnp.float32))
+            pred = {k: np.asarray(v) for k, v in pred.items()}
         # counted here, outside any trace, as :attr:`.batch.BatchSimulator.n_vehicle_seconds` counts the search's:
         # the rows simulated (a forward-mode pass counts its p tangents too, as ``n_simulations`` does)
         if not self.cand.instrument_only:
