@@ -324,8 +324,9 @@ def simulate_on_cores(params, profile: VoltageProfile | SpeedProfile, n_steps: i
 
 
 def _pad_vehicles(x, B: int, pad: int):
-    """A leaf with ``B`` vehicles on its last axis, padded with ``pad`` copies of its last vehicle; other leaves
-    (and ``pad`` 0) unchanged."""
+    """A leaf with ``B`` vehicles on its last axis, padded with ``pad`` copies of its last vehicle (a numpy array
+    for a concrete leaf, to be placed on the cores by :func:`trackenv.parallel.shard`); other leaves (and ``pad``
+    0) unchanged."""
     if not (pad and eqx.is_array(x) and x.ndim and x.shape[-1] == B):
         return x
     if isinstance(x, jax.core.Tracer) or getattr(x, "weak_type", False):
