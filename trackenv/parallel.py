@@ -153,6 +153,16 @@ def batch_sharding(ndim: int, axis: int, batch: int, min_per_device: int | None 
     return NamedSharding(mesh, PartitionSpec(*spec))
 
 
+def host_movable(x) -> bool:
+    """Whether the array ``x`` can be sliced, padded, repeated and placed on the devices from numpy without
+    changing what jax sees: concrete (not traced) and not weakly typed. Done eagerly by ``jax.numpy``, each of
+    those operations compiles a small program for every shape it meets."""
+    import jax
+    import numpy as np
+    return (isinstance(x, (jax.Array, np.ndarray)) and not isinstance(x, jax.core.Tracer)
+            and not getattr(x, "weak_type", False))
+
+
 def shard(tree, batch: int, axis: int = -1, min_per_device: int | None = None):
     """Place every array leaf of ``tree`` whose ``axis`` has length ``batch`` split over the devices
     (other leaves replicated); unchanged if the batch is not split (``split_count(batch, min_per_device)``)."""
@@ -165,11 +175,7 @@ def shard(tree, batch: int, axis: int = -1, min_per_device: int | None = None):
     mesh = Mesh(np.array(cpu_devices()[:n]), ("vehicles",))
 
     def put(x):
-        # placed from the host: placing a device array's slices on other devices compiles a slicing program for
-        # every shape (a weakly typed leaf keeps its type through jax.numpy)
-        host = isinstance(x, (jax.Array, np.ndarray)) and not isinstance(x, jax.core.Tracer) and not getattr(
-            x, "weak_type", False)
-        x = np.asarray(x) if host else jax.numpy.asarray(x)
+        x = np.asarray(x) if host_movable(x) else jax.numpy.asarray(x)  # placed from the host (host_movable)
         if x.ndim and x.shape[axis] == batch:
             return jax.device_put(x, batch_sharding(x.ndim, axis, batch, min_per_device))
         return jax.device_put(x, NamedSharding(mesh, PartitionSpec()))

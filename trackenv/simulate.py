@@ -329,9 +329,8 @@ def _pad_vehicles(x, B: int, pad: int):
     0) unchanged."""
     if not (pad and eqx.is_array(x) and x.ndim and x.shape[-1] == B):
         return x
-    if isinstance(x, jax.core.Tracer) or getattr(x, "weak_type", False):
+    if not parallel.host_movable(x):
         return jnp.concatenate([x, jnp.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
-    # on the host: jax.numpy would compile a slicing, a broadcast and a concatenation for every shape
     x = np.asarray(x)
     return np.concatenate([x, np.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
 

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..compare import POSE, SampleWeights, at_samples, grid_weights, pose_to_log_frame, rectify, stack_trees
+from ..parallel import host_movable
 from ..params import load_params
 from ..simulate import DEFAULT_SUBSTEP, SpeedProfile, VoltageProfile, simulate_on_cores
 from .candidates import Candidate
@@ -278,9 +279,9 @@ class BatchSimulator:
 
 
 def _repeat_vehicles(x, S: int):
-    """Each vehicle of leaf ``x`` repeated ``S`` times on the last axis; a concrete (not weakly typed) array is
-    repeated on the host, which compiles nothing (``jnp.repeat`` compiles a program for every shape)."""
-    if isinstance(x, jax.core.Tracer) or getattr(x, "weak_type", False):
+    """Each vehicle of leaf ``x`` repeated ``S`` times on the last axis, in numpy where
+    :func:`trackenv.parallel.host_movable` allows (a jax array either way)."""
+    if not host_movable(x):
         return jnp.repeat(x, S, axis=-1)
     return jnp.asarray(np.repeat(np.asarray(x), S, axis=-1))
 

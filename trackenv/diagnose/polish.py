@@ -117,10 +117,10 @@ class _Problem:
                 self.sigs.append((j, s))
         self.windows = np.array([0.0 if w is None else float(w) for w in windows])
 
-    def _predict(self, z, host: bool | None = None):
+    def _predict(self, z, host: bool):
         """z (R, p), row r a point of fold r mod F -> {(j, sig): (R, K_j)} predictions at the logs' sample times.
 
-        ``host`` (default: unless ``z`` is traced). Traced (forward mode), everything is jax. On the host (the
+        ``host`` False (``z`` traced, forward mode): everything is jax. On the host (the
         secant Jacobian), the indexing, tiling and transposing and the float32 +, −, ×, ÷ and |x| run in numpy:
         eagerly, each jax operation compiles a small program for every shape it meets (about 680 programs and
         20 s in a diagnosis of three tests), and numpy's float32 operations round as jax's do (where XLA
@@ -128,7 +128,6 @@ class _Problem:
         candidate's parameter arithmetic and the simulation stay in jax. Both give the same numbers to the last
         bit (tests/test_polish_programs.py; docs/performance.md, "The polish's evaluations on the host")."""
         sim, cand = self.sim, self.cand
-        host = not isinstance(z, jax.core.Tracer) if host is None else host
         F = z.shape[0]  # rows simulated (a multiple of the number of folds)
         windows = self.windows[np.arange(F) % self.F]
         u = jax.nn.sigmoid(z)
@@ -170,7 +169,8 @@ class _Problem:
         return out
 
     def _residual(self, z, host: bool | None = None):
-        """Weighted residuals (R, N) and the predictions of :meth:`_predict` (``host`` as there)."""
+        """Weighted residuals (R, N) and the predictions of :meth:`_predict` (``host`` by default unless ``z`` is
+        traced)."""
         host = not isinstance(z, jax.core.Tracer) if host is None else host
         pred = self._predict(z, host)
         xp = np if host else jnp
