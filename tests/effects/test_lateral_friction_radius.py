@@ -48,3 +48,24 @@ def test_mu_min_floor():
     """mu_t(R) = mu_min + mu_max/(a + bR) levels off at mu_min in wide turns."""
     e = get_effect("lateral_friction_radius", mu_max=0.6, a=1.0, b=1.0, mu_min=0.2)
     np.testing.assert_allclose(np.asarray(e.coefficient(np.array([0.0, 1.0, 1e6]))), [0.8, 0.5, 0.2], rtol=1e-5)
+
+
+def test_blend_spans_the_shear_law_and_the_radius_law():
+    """blend = 0 gives the base model's lateral forces (the shear law) to the last bit, blend = 1 the law alone
+    (the default), and a partial blend lies between them in proportion."""
+    s = None
+    out = {}
+    for blend in (None, 0.0, 0.4, 1.0):
+        effects = () if blend is None else (get_effect("lateral_friction_radius", blend=blend),)
+        p = te.load_params("dry_sand", effects=effects)
+        if s is None:
+            s = eqx.tree_at(lambda s: s.vel, initial_state(p), jnp.asarray([0.3, 0.0, 1.5]))
+        out[blend] = np.asarray(evaluate(s, jnp.asarray([6.0, -6.0]), p).forces.lateral)
+    assert np.array_equal(out[0.0], out[None])
+    law = np.asarray(evaluate(s, jnp.asarray([6.0, -6.0]),
+                              te.load_params("dry_sand", effects=(get_effect("lateral_friction_radius"),))).forces.lateral)
+    assert np.array_equal(out[1.0], law)
+    assert np.abs(law - out[None]).max() > 1.0  # the two laws differ here, so the blend is tested
+    np.testing.assert_allclose(out[0.4], 0.4 * law + 0.6 * out[None], rtol=1e-5, atol=1e-4)
+    with pytest.raises(ValueError, match="blend"):
+        get_effect("lateral_friction_radius", blend=1.5)

@@ -19,7 +19,9 @@ absorbs, is not credited to the effect.
 Ranges are the physically plausible ones (the effect classes' ``bounds`` are wider, for users):
 
 - ``slip_sinkage``: k_s 0.02-3 1/m, k_b 0.05-5, z_max 0.01-0.1 m (γ, v_s: defaults);
-- ``lateral_friction_radius``: μ_max 0.1-1.5, b 0.01-3 1/m, μ_min 0-0.6 (a = 0.925, Wong & Chiang);
+- ``lateral_friction_radius``: μ_max 0.1-1.5, b 0.01-3 1/m, μ_min 0-0.6 (a = 0.925, Wong & Chiang), and
+  the law's share of the lateral forces, blend 0-1 (the rest from the shear law: blend = 0 is the base model
+  exactly, whatever the terrain; a law alone with fixed μ values is close to the base on no terrain);
 - ``internal_resistance``: a monotone function of |ω| (:class:`KnotInternalResistance`):
   τ = sign(ω) · (b0 + s1·min(|ω|, 3) + s2·clip(|ω| − 3, 0, 9) + s3·max(|ω| − 12, 0)) with knots at 3 and
   12 rad/s (0.27 and 1.07 m/s of belt speed); b0 = f0 · b*_int(terrain) with f0 0-3 (f0 scales each terrain's
@@ -238,9 +240,11 @@ def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
                   "slip-induced sinkage with bulldozing of the displaced soil (deformable ground)"),
         Candidate("lateral_friction_radius", (ParamSpec("mu_max", 0.1, 1.5, True, "-"),
                                               ParamSpec("b", 0.01, 3.0, True, "1/m"),
-                                              ParamSpec("mu_min", 0.0, 0.6, False, "-")),
-                  {"mu_max": 0.53, "b": 0.15, "mu_min": 0.0},
-                  "lateral coefficient mu_t(R) = mu_min + mu_max/(a + bR) replacing the shear law sideways"),
+                                              ParamSpec("mu_min", 0.0, 0.6, False, "-"),
+                                              ParamSpec("blend", 0.0, 1.0, False, "-")),
+                  {"mu_max": 0.53, "b": 0.15, "mu_min": 0.0, "blend": 0.0},
+                  "lateral coefficient mu_t(R) = mu_min + mu_max/(a + bR), blended with the shear law sideways "
+                  "(blend 1: the law alone, 0: the base model)"),
         Candidate("internal_resistance", (ParamSpec("b0_factor", 0.0, 3.0, False, "x b*_int"),
                                           ParamSpec("s1", 0.0, 0.5, False, "N m s/rad"),
                                           ParamSpec("s2", 0.0, 0.2, False, "N m s/rad"),

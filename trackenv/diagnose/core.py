@@ -87,7 +87,10 @@ RULE_TEXT = (
     "is not evidence of an effect; (4) a physical effect that does not beat "
     "`sensor_artifacts` (max-T over the physical effects, p < alpha) gives way to it if `sensor_artifacts` "
     "itself passes (2)-(3b) and predicts the held-out data at least as well (held-out score); if it predicts them "
-    "worse, the data do not separate the two and neither is named; (5) it closes at least 15% of the held-out "
+    "worse, the data do not separate the two and neither is named; (4b) it beats, by the same paired test (max-T over "
+    "the physical effects, p < alpha), the best fit of every other physical effect that predicts the held-out data at "
+    "least as well (mean Huber loss of the Diebold-Mariano test; no complexity term), else it is not named: the data "
+    "do not separate the two, and the next member is tried; (5) it closes at least 15% of the held-out "
     "gap that the better of `none` and "
     "`recalibrate_base` leaves (its own part: the shrink reported beside it counts from the base model and includes "
     "what the control closes). If no physical effect passes, `sensor_artifacts` is named if it passes "
@@ -362,7 +365,35 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
         if ok and own_shrink(e) < min_shrink:
             ok, why = False, (f"{e} closes only {100 * own_shrink(e):.0f}% of the held-out gap {left_by} "
                               f"(< {100 * min_shrink:.0f}%)")
+        if ok and effect_of(e) != SENSOR:  # (4b)
+            for rival in rivals(e):
+                pr = p_of(e, rival, physical)
+                if pr >= alpha:
+                    ok, p_used, why = False, pr, (
+                        f"{e} does not beat {rival}, another effect's fit that predicts the held-out data at least "
+                        f"as well (p = {pr:.2g} ≥ {alpha:.2g}): the data do not separate the two")
+                    break
+                p_used = max(p_used, pr)
         return e, ok, p_used, why
+
+    robust_score = {}
+
+    def robust_loss(x):
+        """Held-out loss on the Huber losses of the Diebold-Mariano test (a sum over tests of per-sample means,
+        as ``heldout_loss``): a short burst that one prediction catches does not decide who predicts better."""
+        if x not in robust_score:
+            robust_score[x] = float(sum(np.nanmean(v) for v in robust_of(x)))
+        return robust_score[x]
+
+    def rivals(e):
+        """(4b) The best-predicting fit (:func:`robust_loss`) of each other physical effect, where it predicts the
+        held-out data at least as well as ``e``."""
+        best = {}
+        for m in physical:
+            f = effect_of(m)
+            if f != effect_of(e) and (f not in best or robust_loss(m) < robust_loss(best[f])):
+                best[f] = m
+        return [m for m in best.values() if robust_loss(m) <= robust_loss(e)]
 
     # the physical effects' fits (on the control and on the base) in the order of their held-out scores: the
     # effect of the first that passes is named (the tests are max-T corrected over the family, so trying

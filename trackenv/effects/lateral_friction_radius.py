@@ -11,6 +11,12 @@ Force law (replaces the shear-law lateral forces)::
     μ_t(R) = μ_min + μ_max / (a + b R)
     F_lat,i = −μ_t(R) F_n,i smoothsign(v_y,i; v_s)      [N]
 
+``blend`` (default 1: the law alone) mixes the law with the shear law's lateral forces,
+F_lat,i = blend · F_lat,i(μ_t) + (1 − blend) · F_lat,i(shear), so that a family of fitted models that
+includes ``blend`` = 0 contains the base model exactly (the diagnosis's candidate, docs/model.md §8). A
+partial blend reads as a track whose lateral resistance is part shearing (Janosi) and part sliding
+friction.
+
 μ_min (default 0) is a floor of the coefficient at large radii (the residual lateral friction of a
 track sliding sideways in a wide turn; Kitano & Jyozaki's and Steeds's fits of μ_t(R) level off
 rather than vanish).
@@ -42,6 +48,7 @@ class LateralFrictionRadius(Effect):
         "b": (0.0, 10.0),
         "lateral_smoothing": (1e-4, 1.0),
         "yaw_eps": (1e-6, 1.0),
+        "blend": (0.0, 1.0),
     }
 
     mu_max: jax.Array  # -, μ_max
@@ -50,11 +57,13 @@ class LateralFrictionRadius(Effect):
     lateral_smoothing: jax.Array  # m/s, v_s
     yaw_eps: jax.Array  # rad/s, r_eps
     mu_min: jax.Array | float = 0.0  # -, floor of μ_t at large radius
+    blend: jax.Array | float = 1.0  # -, share of μ_t(R) in the lateral forces (the rest: the shear law)
 
     @classmethod
     def default(cls, dtype=jnp.float32):
         f = lambda v: jnp.asarray(v, dtype)  # noqa: E731
-        return cls(mu_max=f(0.53), a=f(0.925), b=f(0.15), lateral_smoothing=f(0.05), yaw_eps=f(1e-3), mu_min=f(0.0))
+        return cls(mu_max=f(0.53), a=f(0.925), b=f(0.15), lateral_smoothing=f(0.05), yaw_eps=f(1e-3), mu_min=f(0.0),
+                   blend=f(1.0))
 
     def turning_radius(self, u, r):
         return jnp.abs(u) / jnp.maximum(jnp.abs(r), self.yaw_eps)
@@ -65,5 +74,7 @@ class LateralFrictionRadius(Effect):
     def forces(self, ctx, forces, tau_int):
         u, r = ctx.state.vel[0], ctx.state.vel[2]
         mu = self.coefficient(self.turning_radius(u, r))  # (*b)
-        lateral = -mu * forces.normal * smoothsign(ctx.kin.lateral_velocity, self.lateral_smoothing)
+        law = -mu * forces.normal * smoothsign(ctx.kin.lateral_velocity, self.lateral_smoothing)
+        # exact at both ends: blend = 1 gives the law, blend = 0 the shear law's forces, to the last bit
+        lateral = self.blend * law + (1.0 - self.blend) * forces.lateral
         return forces._replace(lateral=lateral), tau_int
