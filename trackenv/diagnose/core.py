@@ -376,14 +376,10 @@ def decide(ev: dict, alpha: float = ALPHA, min_shrink: float = MIN_SHRINK) -> di
                 p_used = max(p_used, pr)
         return e, ok, p_used, why
 
-    robust_score = {}
-
     def robust_loss(x):
         """Held-out loss on the Huber losses of the Diebold-Mariano test (a sum over tests of per-sample means,
         as ``heldout_loss``): a short burst that one prediction catches does not decide who predicts better."""
-        if x not in robust_score:
-            robust_score[x] = float(sum(np.nanmean(v) for v in robust_of(x)))
-        return robust_score[x]
+        return float(sum(np.nanmean(v) for v in robust_of(x)))
 
     def rivals(e):
         """(4b) The best-predicting fit (:func:`robust_loss`) of each other physical effect, where it predicts the
