@@ -83,8 +83,8 @@ def test_candidate_anchors_reproduce_the_base_model():
     sim = BatchSimulator(tests)
     base, _ = sim.run(candidate_set()[-1], {})
     for cand in candidate_set():
-        if cand.name in ("none", "slip_sinkage", "grouser_stiction"):
-            continue  # these have no exactly neutral point (tiny but non-zero values)
+        if cand.name in ("none", "slip_sinkage"):
+            continue  # no exactly neutral point (tiny but non-zero values)
         pred, div = sim.run(cand, cand.physical(cand.anchor_unit()[None]))
         assert not div.any()
         for j in range(len(tests)):
@@ -125,6 +125,32 @@ def test_tests_of_different_lengths_share_a_padded_batch_with_the_same_predictio
             assert np.max(np.abs(d)) <= 1e-3 * t.span[sig] + 1e-5, (t.name, sig)
 
 
+def test_a_log_range_with_a_knee_starts_at_zero_and_maps_back():
+    """A parameter fitted on a logarithmic scale whose range starts at zero (``ParamSpec.knee``): u = 0 is exactly
+    zero, u = 1 the upper bound, values well above the knee are spaced logarithmically, the map and its inverse
+    agree, and the jax form (the polish's) gives the numpy form's values."""
+    import jax.numpy as jnp
+
+    from trackenv.diagnose.candidates import ParamSpec
+
+    spec = ParamSpec("yaw_moment", 0.0, 30.0, True, "N m", knee=0.5)
+    u = np.linspace(0.0, 1.0, 41)
+    x = spec.to_physical(u)
+    assert x[0] == 0.0 and x[-1] == pytest.approx(30.0, rel=1e-12)
+    assert np.all(np.diff(x) > 0)
+    np.testing.assert_allclose(spec.to_unit(x), u, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(spec.to_physical_jnp(jnp.asarray(u, jnp.float32))), x, rtol=2e-6, atol=1e-7)
+    # far above the knee a step in u multiplies the value by a constant factor, as on a log scale
+    big = x[x > 10 * spec.knee]
+    ratios = big[1:] / big[:-1]
+    assert ratios.max() / ratios.min() < 1.05
+    with pytest.raises(ValueError, match="knee"):
+        ParamSpec("bad", 0.0, 1.0, False, knee=0.1)
+    # the grouser family's anchor is now exactly the base model (no breakaway moment)
+    grouser = {c.name: c for c in candidate_set()}["grouser_stiction"]
+    assert grouser.physical(grouser.anchor_unit()[None])["yaw_moment"][0] == 0.0
+
+
 def test_an_effect_on_the_control_contains_the_fitted_control():
     """An effect fitted on top of ``recalibrate_base`` (:meth:`Candidate.standing_on`) reproduces the control
     at its anchor, whatever the control's fitted factors: through the batched search (simulated effects, among
@@ -144,7 +170,8 @@ def test_an_effect_on_the_control_contains_the_fitted_control():
               "shear_modulus_factor": 1.6}
     ctrl, _ = sim.run(recal, {k: np.array([v]) for k, v in fitted.items()})
     base, _ = sim.run(cands["none"], {})
-    for name in ("pitch_load_transfer", "internal_resistance", "sensor_artifacts", "lateral_friction_radius"):
+    for name in ("pitch_load_transfer", "internal_resistance", "sensor_artifacts", "lateral_friction_radius",
+                 "grouser_stiction"):
         cand = cands[name].standing_on(recal)
         vals = cand.physical(cand.anchor_unit(fitted)[None]) | {ON + k: np.array([v]) for k, v in fitted.items()}
         pred, div = sim.run(cand, vals)

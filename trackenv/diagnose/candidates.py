@@ -96,20 +96,47 @@ def effect_of(member: str) -> str:
 
 @dataclass(frozen=True)
 class ParamSpec:
+    """A fitted parameter's range [lo, hi] and its map from the unit interval: linear, logarithmic (``log``), or,
+    with ``log`` and a ``knee``, logarithmic above the knee and linear below it, so that the range can start at
+    zero: x = lo + knee · (exp(u · ln(1 + (hi − lo)/knee)) − 1)."""
+
     name: str
     lo: float
     hi: float
     log: bool = False
     unit: str = ""
+    knee: float | None = None
+
+    def __post_init__(self):
+        if self.knee is not None and not (self.log and self.knee > 0):
+            raise ValueError(f"{self.name}: a knee needs log=True and a positive value, got {self.knee!r}")
+
+    @property
+    def _log_span(self) -> float:
+        return math.log1p((self.hi - self.lo) / self.knee)
 
     def to_physical(self, u):
         u = np.clip(np.asarray(u, np.float64), 0.0, 1.0)
+        if self.knee is not None:
+            return self.lo + self.knee * np.expm1(u * self._log_span)
         if self.log:
             return np.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
         return self.lo + u * (self.hi - self.lo)
 
+    def to_physical_jnp(self, u):
+        """:meth:`to_physical` in jax (traceable; ``u`` already in [0, 1])."""
+        import jax.numpy as jnp  # noqa: PLC0415
+
+        if self.knee is not None:
+            return self.lo + self.knee * jnp.expm1(u * self._log_span)
+        if self.log:
+            return jnp.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
+        return self.lo + u * (self.hi - self.lo)
+
     def to_unit(self, x):
         x = np.asarray(x, np.float64)
+        if self.knee is not None:
+            return np.clip(np.log1p(np.maximum(x - self.lo, 0.0) / self.knee) / self._log_span, 0.0, 1.0)
         if self.log:
             return np.clip((np.log(x) - math.log(self.lo)) / (math.log(self.hi) - math.log(self.lo)), 0.0, 1.0)
         return np.clip((x - self.lo) / (self.hi - self.lo), 0.0, 1.0)
@@ -253,12 +280,12 @@ def candidate_set(internal_resistance: str = "constant") -> list[Candidate]:
                    "s2": 0.076 if viscous else 0.0, "s3": 0.076 if viscous else 0.0},
                   "internal track resistance, a monotone piecewise-linear function of |omega| (knots 3, 12 rad/s): "
                   "constant / viscous / convex / knee-shaped laws"),
-        Candidate("grouser_stiction", (ParamSpec("yaw_moment", 0.5, 30.0, True, "N m"),
+        Candidate("grouser_stiction", (ParamSpec("yaw_moment", 0.0, 30.0, True, "N m", knee=0.5),
                                        ParamSpec("yaw_fade", 0.1, 5.0, True, "rad/s"),
                                        ParamSpec("force", 0.0, 60.0, False, "N"),
                                        ParamSpec("lateral_gain", 0.0, 1.5, False, "-"),
                                        ParamSpec("lateral_slide_speed", 0.02, 0.5, True, "m/s")),
-                  {"yaw_moment": 0.5, "yaw_fade": 1.5, "force": 0.0, "lateral_gain": 0.0, "lateral_slide_speed": 0.1},
+                  {"yaw_moment": 0.0, "yaw_fade": 1.5, "force": 0.0, "lateral_gain": 0.0, "lateral_slide_speed": 0.1},
                   "breakaway resistance of grousers on hard ground: a yaw moment and force fading with yaw/forward "
                   "speed, and the elements' lateral force amplified while they slide slowly"),
         Candidate("pitch_load_transfer", (ParamSpec("height_factor", 0.0, 3.0, False, "x cg height"),

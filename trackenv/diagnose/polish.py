@@ -28,8 +28,6 @@ compiles one simulation for both.
 
 from __future__ import annotations
 
-import math
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -50,12 +48,6 @@ def points_per_evaluation(n_params: int, jacobian: str = "secant") -> int:
     """Parameter points one polish evaluation simulates per fit: the point and its Jacobian's, 2p for the secant
     (±``SECANT_STEP`` per parameter) or p tangents for forward mode."""
     return 1 + (2 if jacobian == "secant" else 1) * n_params
-
-
-def _to_physical_jnp(spec, u):
-    if spec.log:
-        return jnp.exp(math.log(spec.lo) + u * (math.log(spec.hi) - math.log(spec.lo)))
-    return spec.lo + u * (spec.hi - spec.lo)
 
 
 def _host_divide(a, b):
@@ -132,7 +124,7 @@ class _Problem:
         windows = self.windows[np.arange(F) % self.F]
         u = jax.nn.sigmoid(z)
         u = np.asarray(u) if host else u
-        vals = {s.name: _to_physical_jnp(s, u[:, k]) for k, s in enumerate(cand.specs)}
+        vals = {s.name: s.to_physical_jnp(u[:, k]) for k, s in enumerate(cand.specs)}
         fold_of = np.arange(F) % self.F
         fixed = {} if self.below is None else {ON + k: np.array([self.below[f][k] for f in fold_of])
                                                for k in self.below[0]}
