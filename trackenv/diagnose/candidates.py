@@ -115,23 +115,22 @@ class ParamSpec:
     def _log_span(self) -> float:
         return math.log1p((self.hi - self.lo) / self.knee)
 
-    def to_physical(self, u):
-        u = np.clip(np.asarray(u, np.float64), 0.0, 1.0)
+    def _from_unit(self, u, xp):
+        """The map from the unit interval with array module ``xp`` (numpy or jax.numpy)."""
         if self.knee is not None:
-            return self.lo + self.knee * np.expm1(u * self._log_span)
+            return self.lo + self.knee * xp.expm1(u * self._log_span)
         if self.log:
-            return np.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
+            return xp.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
         return self.lo + u * (self.hi - self.lo)
+
+    def to_physical(self, u):
+        return self._from_unit(np.clip(np.asarray(u, np.float64), 0.0, 1.0), np)
 
     def to_physical_jnp(self, u):
         """:meth:`to_physical` in jax (traceable; ``u`` already in [0, 1])."""
         import jax.numpy as jnp  # noqa: PLC0415
 
-        if self.knee is not None:
-            return self.lo + self.knee * jnp.expm1(u * self._log_span)
-        if self.log:
-            return jnp.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
-        return self.lo + u * (self.hi - self.lo)
+        return self._from_unit(u, jnp)
 
     def to_unit(self, x):
         x = np.asarray(x, np.float64)
